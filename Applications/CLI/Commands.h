@@ -1,0 +1,29 @@
+#pragma once
+// The subcommands of `brainshift` (../shared/CONTRACT.md). Each `add...Command` declares its flags
+// on the CLI11 app and sets the callback that runs it. A callback reports bad input by throwing
+// InputError (exit 2) and a failure of the method by MethodError (exit 1).
+#include <CLI/CLI.hpp>
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace brainshift::cli {
+
+/// The flags `register` and its stages share.
+struct RunOptions {
+  std::filesystem::path preopImage, preopLabels, intraopImage, outputDir, config;
+  std::vector<std::string> overlays;
+  std::optional<int> ranks;
+  std::optional<double> meshResolutionMm;
+  std::optional<std::string> solverOptions;
+};
+
+void addEvaluateCommand(CLI::App& app);
+void addDemoCommand(CLI::App& app);
+void addRegisterCommand(CLI::App& app);
+void addStageCommands(CLI::App& app);
+void addBenchCommand(CLI::App& app);
+
+} // namespace brainshift::cli

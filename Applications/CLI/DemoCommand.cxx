@@ -1,0 +1,201 @@
+#include "AtomicFile.h"
+#include "BrainShiftCaseSimulator.h"
+#include "BrainShiftErrors.h"
+#include "LandmarkEvaluation.h"
+#include "RunCommands.h"
+#include "SceneIO.h"
+
+#include <itkIdentityTransform.h>
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+
+namespace brainshift::cli {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+struct DemoOptions {
+  RunOptions run;
+  std::string size = "full";
+  std::uint64_t seed = 2000;
+  double shift = 10.0;
+  std::string craniotomy = "right-frontal";
+  bool noResection = false;
+  std::vector<double> rotation{4.0, -3.0, 6.0};
+  std::vector<double> translation{6.0, -8.0, 5.0};
+  double noise = 0.03, bias = 0.2;
+};
+
+CaseParameters caseParametersOf(const DemoOptions& o)
+{
+  CaseParameters p;
+  if (o.size != "full" && o.size != "small") throw InputError("--size: '" + o.size + "' is neither full nor small");
+  p.size = o.size == "full" ? CaseSize::Full : CaseSize::Small;
+  p.seed = o.seed;
+  p.shiftMillimetres = o.shift;
+  p.craniotomy = craniotomySiteFromString(o.craniotomy);
+  p.resection = !o.noResection;
+  for (int i = 0; i < 3; ++i) {
+    p.rotationDegrees[i] = o.rotation[i];
+    p.translationMillimetres[i] = o.translation[i];
+  }
+  p.noiseFraction = o.noise;
+  p.biasStrength = o.bias;
+  p.validate();
+  return p;
+}
+
+/// The case as a 3D Slicer scene: the intraoperative scan in the world, the preoperative data
+/// under the true intraop_to_preop transform (so they overlay it), the truth labels, the landmarks.
+void writeCaseScene(const SimulatedCase& simulated, const CaseFiles& files)
+{
+  Scene scene;
+  auto stored = [](auto node, const fs::path& file) {
+    node->setStorageFile(fs::absolute(file));
+    node->markStored();
+    return node;
+  };
+  auto truth = scene.add(stored(TransformNode::create("truth intraop_to_preop", simulated.intraopToPreop), files.truthTransform));
+  truth->setRole("truth");
+  auto intraop = scene.add(stored(ScalarVolumeNode::create("intraop image", simulated.intraopImage), files.intraopImage));
+  intraop->setRole("intraop");
+  auto preop = scene.add(stored(ScalarVolumeNode::create("preop image", simulated.preopImage), files.preopImage));
+  preop->setRole("preop");
+  preop->setParentTransformId(truth->id());
+  auto labels = scene.add(stored(LabelMapVolumeNode::create("preop labels", simulated.preopLabels), files.preopLabels));
+  labels->setRole("preop");
+  labels->setParentTransformId(truth->id());
+  auto fmri = scene.add(stored(ScalarVolumeNode::create("preop fmri", simulated.preopFmri), files.preopFmri));
+  fmri->setRole("overlay");
+  VolumeDisplay statistics;
+  statistics.colorTable = "ColdToHotRainbow";
+  statistics.window = 16.0;
+  statistics.level = 0.0;
+  statistics.lowerThreshold = 3.0;
+  statistics.upperThreshold = 100.0;
+  fmri->setDisplay(statistics);
+  fmri->setParentTransformId(truth->id());
+  auto truthLabels = scene.add(stored(LabelMapVolumeNode::create("truth intraop labels", simulated.intraopLabels), files.truthIntraopLabels));
+  truthLabels->setRole("truth");
+  auto landmarks = scene.add(LandmarksNode::create("landmarks", simulated.landmarks));
+  landmarks->setRole("truth");
+  landmarks->setParentTransformId(truth->id());
+  writeScene(scene, files.folder / "scene.mrml");
+}
+
+json evaluationOf(const SpatialTransform& transform, const std::vector<LandmarkPair>& landmarks)
+{
+  return json::parse(toJsonText(evaluateTransform(transform, landmarks)));
+}
+
+} // namespace
+
+void addDemoCommand(CLI::App& app)
+{
+  auto options = std::make_shared<DemoOptions>();
+  options->run.outputDir = "brainshift-demo";
+  CLI::App* command = app.add_subcommand(
+    "demo", "The main job on the built-in case: Colin27 with a simulated brain shift of known truth; runs "
+            "register on it and evaluates the result");
+  command->add_option("--output-dir", options->run.outputDir, "output folder (the case goes to its case/)")->capture_default_str();
+  command->add_option("--size", options->size, "full (1 mm preop, 256x256x60 intraop) or small (for tests)")->capture_default_str();
+  command->add_option("--seed", options->seed, "random seed of the case (noise, tumour shape, landmarks)")->capture_default_str();
+  command->add_option("--shift", options->shift, "peak sinking of the brain under the craniotomy, mm")->capture_default_str();
+  command->add_option("--craniotomy", options->craniotomy,
+                      "right-frontal, left-frontal, right-parietal, left-parietal or vertex")->capture_default_str();
+  command->add_flag("--no-resection", options->noResection, "keep the tumour in the intraoperative scan");
+  command->add_option("--rotation", options->rotation, "head rotation in the scanner about L, P, S, degrees")->capture_default_str()
+    ->expected(3);
+  command->add_option("--translation", options->translation, "head translation in the scanner, LPS mm")->capture_default_str()->expected(3);
+  command->add_option("--noise", options->noise, "Rician noise sigma as a fraction of white matter")->capture_default_str();
+  command->add_option("--bias", options->bias, "bias field strength (log amplitude)")->capture_default_str();
+  command->add_option("--config", options->run.config, "JSON configuration for register");
+  command->add_option("--mesh-resolution", options->run.meshResolutionMm, "for register: tetrahedron edge length, mm");
+  command->add_option("--ranks", options->run.ranks, "for register: MPI ranks of the finite element worker");
+  command->add_option("--solver-options", options->run.solverOptions, "for register: PETSc options");
+
+  command->callback([options] {
+    const CaseParameters parameters = caseParametersOf(*options);
+    const Configuration configuration = configurationFor(options->run);
+    const fs::path out = options->run.outputDir;
+    const fs::path reportFile = out / "report.json";
+    std::error_code ec;
+    if (fs::exists(reportFile, ec)) {
+      RunReport previous(reportFile);
+      if (!previous.document().contains("demo")) {
+        throw InputError(out.string() + ": holds the results of another run (not a demo); choose another --output-dir");
+      }
+      fs::remove(reportFile);
+    }
+
+    Stopwatch caseClock;
+    std::printf("building the built-in case (%s, seed %llu, shift %.1f mm, %s craniotomy%s) ...\n", options->size.c_str(),
+                static_cast<unsigned long long>(parameters.seed), parameters.shiftMillimetres,
+                toString(parameters.craniotomy).c_str(), parameters.resection ? ", resection" : "");
+    std::fflush(stdout);
+    const SimulatedCase simulated = simulateCase(parameters);
+    const CaseFiles files(out / "case");
+    writeCase(simulated, parameters, files.folder);
+    writeCaseScene(simulated, files);
+    const double caseSeconds = caseClock.seconds();
+    const CaseFigures& f = simulated.figures;
+    std::printf("  %zu landmarks, max brain displacement %.2f mm, gap %.1f ml, cavity %.1f ml (%.1f s)\n",
+                simulated.landmarks.size(), f.maxBrainDisplacementMm, f.gapVolumeMl, f.cavityVolumeMl, caseSeconds);
+
+    RunReport report(reportFile);
+    report.set("demo", {{"case_folder", "case"},
+                        {"case_seconds", caseSeconds},
+                        {"size", options->size},
+                        {"seed", parameters.seed},
+                        {"shift_mm", parameters.shiftMillimetres}});
+    RunOptions run = options->run;
+    run.preopImage = files.preopImage;
+    run.preopLabels = files.preopLabels;
+    run.intraopImage = files.intraopImage;
+    run.overlays = {"fmri=" + files.preopFmri.string()};
+    RegistrationInputs inputs = loadRegistrationInputs({run.preopImage, run.preopLabels, run.intraopImage,
+                                                        {parseOverlayArgument(run.overlays.front())}});
+    report.addWarnings(inputs.warnings);
+    bool pipelineComplete = false;
+    try {
+      runPipeline(run, configuration, report);
+      pipelineComplete = true;
+    } catch (const NotAvailableError& e) {
+      report.addWarning(std::string(e.what()) + "; the demo evaluates what exists");
+      std::printf("note: %s\n", e.what());
+    } catch (const MethodError& e) {
+      report.addWarning(e.what());
+      report.save();
+      throw;
+    }
+
+    // Evaluation against the truth.
+    json transforms = json::object();
+    auto identity = itk::IdentityTransform<double, 3>::New();
+    transforms["identity"] = evaluationOf(*identity, simulated.landmarks);
+    transforms["truth_rigid"] = evaluationOf(*simulated.rigidIntraopToPreop, simulated.landmarks);
+    transforms["truth"] = evaluationOf(*simulated.intraopToPreop, simulated.landmarks);
+    for (const auto& [key, file] : {std::pair<std::string, fs::path>{"brainshift_rigid", out / "rigid_intraop_to_preop.tfm"},
+                                    {"brainshift", out / "intraop_to_preop.h5"}}) {
+      if (fs::exists(file, ec)) transforms[key] = evaluationOf(*readTransform(file), simulated.landmarks);
+    }
+    json evaluation = {{"landmarks", "case/landmarks.csv"},
+                       {"pairs", simulated.landmarks.size()},
+                       {"pipeline_complete", pipelineComplete},
+                       {"transforms", transforms}};
+    writeTextFileAtomically(out / "evaluation.json", evaluation.dump(2) + "\n");
+    report.save();
+
+    std::printf("target registration error on %zu landmarks (mm):\n", simulated.landmarks.size());
+    for (auto it = transforms.begin(); it != transforms.end(); ++it) {
+      std::printf("  %-18s mean %7.3f  p95 %7.3f  max %7.3f\n", it.key().c_str(), it.value()["mean_mm"].get<double>(),
+                  it.value()["p95_mm"].get<double>(), it.value()["max_mm"].get<double>());
+    }
+    std::printf("wrote %s (report.json, evaluation.json, case/)\n", out.c_str());
+  });
+}
+
+} // namespace brainshift::cli

@@ -1,0 +1,77 @@
+#include "RunCommands.h"
+
+#include "BrainShiftErrors.h"
+#include "VolumeIO.h"
+
+#include <iostream>
+
+namespace brainshift::cli {
+namespace fs = std::filesystem;
+
+void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInputs, unsigned offeredInputs,
+                   bool solverFlags, bool meshFlags)
+{
+  auto input = [&](InputFlag flag, const char* name, fs::path& target, const char* help) {
+    if (!(offeredInputs & unsigned(flag))) return;
+    CLI::Option* option = command->add_option(name, target, help);
+    if (requiredInputs & unsigned(flag)) option->required();
+  };
+  input(InputFlag::PreopImage, "--preop-image", options.preopImage, "preoperative MRI (NIfTI, NRRD, MetaImage or a DICOM folder)");
+  input(InputFlag::PreopLabels, "--preop-labels", options.preopLabels,
+        "preoperative label map on the preoperative image's grid (0 background, 1 head, 2 parenchyma, 3 ventricles, 4 tumour)");
+  input(InputFlag::IntraopImage, "--intraop-image", options.intraopImage, "intraoperative MRI");
+  if (offeredInputs & unsigned(InputFlag::Overlays)) {
+    command->add_option("--overlay", options.overlays,
+                        "NAME=FILE: another preoperative volume (fMRI statistics, MRA) to warp; repeatable");
+  }
+  command->add_option("--output-dir", options.outputDir, "the case's output folder")->required();
+  command->add_option("--config", options.config, "JSON configuration (materials, mesh, solver); flags override it");
+  if (meshFlags) {
+    command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 3)");
+  }
+  if (solverFlags) {
+    command->add_option("--ranks", options.ranks, "MPI ranks of the finite element worker (default 1)");
+    command->add_option("--solver-options", options.solverOptions,
+                        "PETSc options over the tuned default, e.g. \"-ksp_type gmres -pc_type bjacobi\"");
+  }
+}
+
+Configuration configurationFor(const RunOptions& options)
+{
+  Configuration configuration = options.config.empty() ? Configuration{} : Configuration::load(options.config);
+  if (options.meshResolutionMm) configuration.meshResolutionMm = *options.meshResolutionMm;
+  if (options.solverOptions) configuration.solverOptions = *options.solverOptions;
+  if (options.ranks) configuration.ranks = *options.ranks;
+  configuration.validate(options.config.empty() ? "command line" : "command line and " + options.config.string());
+  return configuration;
+}
+
+const std::vector<PipelineStage>& pipelineStages()
+{
+  static const std::vector<PipelineStage> stages = {
+    {"rigid", "rigid registration of the intraoperative to the preoperative MRI by mutual information "
+              "(writes rigid_intraop_to_preop.tfm)", nullptr},
+    {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)", nullptr},
+    {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", nullptr},
+    {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
+    {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)", nullptr},
+    {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "
+             "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", nullptr},
+  };
+  return stages;
+}
+
+void runPipeline(const RunOptions& options, const Configuration& configuration, RunReport& report)
+{
+  for (const PipelineStage& stage : pipelineStages()) {
+    if (!stage.run) {
+      throw NotAvailableError("stage '" + stage.name + "' (" + stage.summary.substr(0, stage.summary.find(" (")) +
+                              ") is not available yet in this build");
+    }
+    std::cout << "[" << stage.name << "]\n" << std::flush;
+    stage.run(options, configuration, report);
+    report.save();
+  }
+}
+
+} // namespace brainshift::cli

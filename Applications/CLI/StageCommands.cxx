@@ -1,0 +1,101 @@
+#include "BrainShiftErrors.h"
+#include "RunCommands.h"
+#include "VolumeIO.h"
+
+#include <memory>
+
+namespace brainshift::cli {
+namespace fs = std::filesystem;
+
+namespace {
+constexpr unsigned PreopImage = unsigned(InputFlag::PreopImage), PreopLabels = unsigned(InputFlag::PreopLabels),
+                   IntraopImage = unsigned(InputFlag::IntraopImage), Overlays = unsigned(InputFlag::Overlays);
+
+RegistrationInputPaths inputPathsOf(const RunOptions& options)
+{
+  RegistrationInputPaths paths{options.preopImage, options.preopLabels, options.intraopImage, {}};
+  for (const std::string& overlay : options.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
+  return paths;
+}
+
+/// Reads and checks the inputs a stage was given (all of them when the three images are given).
+void checkGivenInputs(const RunOptions& options)
+{
+  if (!options.preopImage.empty() && !options.preopLabels.empty() && !options.intraopImage.empty()) {
+    loadRegistrationInputs(inputPathsOf(options));
+    return;
+  }
+  if (!options.preopImage.empty()) readScalarVolume(options.preopImage);
+  if (!options.preopLabels.empty()) readLabelVolume(options.preopLabels);
+  if (!options.intraopImage.empty()) readScalarVolume(options.intraopImage);
+  for (const std::string& overlay : options.overlays) readScalarVolume(parseOverlayArgument(overlay).file);
+}
+
+struct StageFlags {
+  unsigned required, offered;
+  bool solver, mesh;
+};
+
+StageFlags flagsOf(const std::string& stage)
+{
+  if (stage == "rigid") return {PreopImage | IntraopImage, PreopImage | IntraopImage | PreopLabels, false, false};
+  if (stage == "classify") return {PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage, false, false};
+  if (stage == "mesh") return {PreopLabels, PreopLabels, false, true};
+  if (stage == "surface") return {IntraopImage, IntraopImage, false, false};
+  if (stage == "simulate") return {0, 0, true, false};
+  return {PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays, false, false};
+}
+} // namespace
+
+void addRegisterCommand(CLI::App& app)
+{
+  auto options = std::make_shared<RunOptions>();
+  CLI::App* command = app.add_subcommand("register", "The whole intraoperative update: every stage, in order");
+  addRunOptions(command, *options, PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays,
+                true, true);
+  command->callback([options] {
+    const Configuration configuration = configurationFor(*options);
+    RegistrationInputs inputs = loadRegistrationInputs(inputPathsOf(*options));
+    RunReport report(options->outputDir / "report.json");
+    report.addWarnings(inputs.warnings);
+    try {
+      runPipeline(*options, configuration, report);
+    } catch (const MethodError& e) {
+      report.addWarning(e.what());
+      report.save();
+      throw;
+    }
+  });
+}
+
+void addStageCommands(CLI::App& app)
+{
+  for (const PipelineStage& stage : pipelineStages()) {
+    auto options = std::make_shared<RunOptions>();
+    CLI::App* command = app.add_subcommand(stage.name, "Stage alone: " + stage.summary);
+    const StageFlags flags = flagsOf(stage.name);
+    addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh);
+    command->callback([options, stage] {
+      const Configuration configuration = configurationFor(*options);
+      checkGivenInputs(*options);
+      if (!stage.run) {
+        throw NotAvailableError("stage '" + stage.name + "' is not available yet in this build");
+      }
+      RunReport report(options->outputDir / "report.json");
+      stage.run(*options, configuration, report);
+      report.save();
+    });
+  }
+}
+
+void addBenchCommand(CLI::App& app)
+{
+  CLI::App* command = app.add_subcommand("bench", "Speed and accuracy measurements, and the charts of one against the other");
+  command->allow_extras();
+  command->callback([] {
+    throw NotAvailableError("bench: the speed-against-accuracy study is not available yet in this build "
+                            "(it arrives with the stages it measures)");
+  });
+}
+
+} // namespace brainshift::cli

@@ -1,0 +1,213 @@
+#!/usr/bin/env bash
+# Command-line tests of brainshift. Usage: BrainShiftCommandLineTest.sh CASE BRAINSHIFT WORKDIR
+# DemoSmallCase runs `brainshift demo --size small` once into WORKDIR/demo; the other cases use it.
+set -uo pipefail
+case_name=$1
+brainshift=$2
+work=$3
+demo=$work/demo
+case_dir=$demo/case
+failures=0
+
+fail() { echo "FAILED: $*" >&2; failures=$((failures + 1)); }
+
+# expect STATUS STDERR_FRAGMENT -- command...: runs the command, checks the exit status, that
+# stderr is one line (when the status is not 0) and that it contains the fragment.
+expect() {
+  local status=$1 fragment=$2
+  shift 3
+  local err
+  err=$(mktemp)
+  "$@" >/dev/null 2>"$err"
+  local got=$?
+  if [ "$got" -ne "$status" ]; then
+    fail "exit $got, expected $status: $* (stderr: $(cat "$err"))"
+  elif [ "$status" -ne 0 ] && [ "$(grep -c . "$err")" -ne 1 ]; then
+    fail "stderr is not one line: $* -> $(cat "$err")"
+  elif [ -n "$fragment" ] && ! grep -qF -- "$fragment" "$err"; then
+    fail "stderr lacks '$fragment': $* -> $(cat "$err")"
+  fi
+  rm -f "$err"
+}
+
+json_value() { python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(eval('d'+sys.argv[2]))" "$1" "$2"; }
+# float_check FILE PYTHON_EXPR CONDITION: e.g. float_check x.json "['mean_mm']" "< 0.02"
+float_check() {
+  local value
+  value=$(json_value "$1" "$2") || { fail "cannot read $2 from $1"; return; }
+  python3 -c "import sys; sys.exit(0 if float('$value') $3 else 1)" || fail "$1 $2 = $value, expected $3"
+}
+
+checksums() { find "$@" -type f -print0 | sort -z | xargs -0 sha256sum; }
+
+# Small inputs crafted with Python's standard library (no numpy): a NIfTI with a NaN voxel,
+# a truncated one, a text file posing as an image.
+make_bad_inputs() {
+  local dir=$1
+  mkdir -p "$dir"
+  python3 - "$dir" <<'PY'
+import gzip, struct, sys, math
+d = sys.argv[1]
+def nifti(path, values, dims=(4, 4, 4)):
+    hdr = bytearray(348)
+    struct.pack_into('<i', hdr, 0, 348)
+    struct.pack_into('<8h', hdr, 40, 3, dims[0], dims[1], dims[2], 1, 1, 1, 1)
+    struct.pack_into('<h', hdr, 70, 16)   # float32
+    struct.pack_into('<h', hdr, 72, 32)
+    struct.pack_into('<8f', hdr, 76, 1, 1, 1, 1, 1, 1, 1, 1)
+    struct.pack_into('<f', hdr, 108, 352)
+    struct.pack_into('<h', hdr, 252, 1)   # qform_code
+    hdr[344:348] = b'n+1\0'
+    data = struct.pack('<%df' % len(values), *values)
+    with gzip.open(path, 'wb') as f:
+        f.write(bytes(hdr) + b'\0' * 4 + data)
+n = 64
+nifti(d + '/nan.nii.gz', [float(i) if i != 10 else math.nan for i in range(n)])
+good = d + '/good.nii.gz'
+nifti(good, [float(i) for i in range(n)])
+raw = open(good, 'rb').read()
+open(d + '/truncated.nii.gz', 'wb').write(raw[: len(raw) // 2])
+open(d + '/text.nii.gz', 'w').write('this is not an image\n')
+PY
+}
+
+case "$case_name" in
+DemoSmallCase)
+  rm -rf "$demo"
+  mkdir -p "$work"
+  "$brainshift" demo --size small --output-dir "$demo" || fail "demo exited $?"
+  ;;
+
+HelpEverywhere)
+  expect 0 "" -- "$brainshift" --help
+  for sub in demo register rigid classify mesh surface simulate warp evaluate bench; do
+    expect 0 "" -- "$brainshift" "$sub" --help
+  done
+  "$brainshift" register --help | grep -q -- "--solver-options" || fail "register --help lacks --solver-options"
+  ;;
+
+UsageErrors)
+  expect 2 "subcommand is required" -- "$brainshift"
+  expect 2 "" -- "$brainshift" no-such-command
+  expect 2 "--no-such-flag" -- "$brainshift" evaluate --no-such-flag --transform a --landmarks b
+  expect 2 "--landmarks is required" -- "$brainshift" evaluate --transform a.tfm
+  expect 2 "--ranks" -- "$brainshift" simulate --output-dir "$work/x" --ranks many
+  expect 2 "--size" -- "$brainshift" demo --size huge --output-dir "$work/usage-demo"
+  expect 2 "--shift" -- "$brainshift" demo --shift 80 --output-dir "$work/usage-demo"
+  expect 2 "--craniotomy" -- "$brainshift" demo --craniotomy occipital --output-dir "$work/usage-demo"
+  [ -e "$work/usage-demo" ] && fail "a refused demo left $work/usage-demo behind"
+  expect 2 "ranks" -- "$brainshift" register --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
+    --output-dir "$work/usage-register" --ranks 0
+  ;;
+
+EvaluateTruth)
+  out=$work/evaluate-truth
+  rm -rf "$out"
+  "$brainshift" evaluate --transform "$case_dir/truth/intraop_to_preop.h5" --landmarks "$case_dir/landmarks.csv" \
+    --json "$out/truth.json" > "$out.txt" || fail "evaluate exited $?"
+  grep -q "per pair" "$out.txt" || fail "evaluate printed no per-pair table"
+  float_check "$out/truth.json" "['mean_mm']" "< 0.02"
+  float_check "$out/truth.json" "['max_mm']" "< 0.02"
+  [ "$(json_value "$out/truth.json" "['pairs'][0]['name']")" = "craniotomy-01" ] || fail "first pair is not craniotomy-01"
+  pairs=$(($(wc -l < "$case_dir/landmarks.csv") - 1))
+  [ "$(json_value "$out/truth.json" "['pairs'].__len__()")" = "$pairs" ] || fail "not every pair is in the JSON"
+  # The rigid part alone: exact on the head, far off under the craniotomy.
+  "$brainshift" evaluate --transform "$case_dir/truth/rigid_intraop_to_preop.tfm" --landmarks "$case_dir/landmarks.csv" \
+    --json "$out/rigid.json" >/dev/null || fail "evaluate of the rigid part exited $?"
+  float_check "$out/rigid.json" "['groups']['head']['max_mm']" "< 0.02"
+  float_check "$out/rigid.json" "['groups']['craniotomy']['mean_mm']" "> 3"
+  ;;
+
+EvaluateBadInput)
+  bad=$work/evaluate-bad
+  rm -rf "$bad" && mkdir -p "$bad"
+  truth=$case_dir/truth/intraop_to_preop.h5
+  expect 2 "$bad/none.h5: no such file" -- "$brainshift" evaluate --transform "$bad/none.h5" --landmarks "$case_dir/landmarks.csv"
+  printf 'not a transform\n' > "$bad/text.tfm"
+  expect 2 "$bad/text.tfm" -- "$brainshift" evaluate --transform "$bad/text.tfm" --landmarks "$case_dir/landmarks.csv"
+  printf 'name,x,y,z\n' > "$bad/header.csv"
+  expect 2 "$bad/header.csv:1" -- "$brainshift" evaluate --transform "$truth" --landmarks "$bad/header.csv"
+  head -3 "$case_dir/landmarks.csv" > "$bad/nan.csv"
+  printf 'x-01,nan,0,0,0,0,0\n' >> "$bad/nan.csv"
+  expect 2 "$bad/nan.csv:4" -- "$brainshift" evaluate --transform "$truth" --landmarks "$bad/nan.csv"
+  expect 2 "no pairs" -- "$brainshift" evaluate --transform "$truth" --landmarks <(head -1 "$case_dir/landmarks.csv")
+  expect 2 "" -- "$brainshift" evaluate --transform "$truth" --landmarks "$bad/header.csv" --json "$bad/out.json"
+  [ -e "$bad/out.json" ] && fail "a failed evaluate wrote $bad/out.json"
+  ;;
+
+RegisterBadInput)
+  bad=$work/register-bad
+  rm -rf "$bad"
+  make_bad_inputs "$bad/inputs"
+  before=$(checksums "$bad/inputs" "$case_dir")
+  P=$case_dir/preop_image.nii.gz L=$case_dir/preop_labels.nii.gz I=$case_dir/intraop_image.nii.gz
+  run() { expect 2 "$1" -- "$brainshift" register "${@:2}" --output-dir "$bad/out"; }
+  run "$bad/inputs/missing.nii.gz: no such file" --preop-image "$bad/inputs/missing.nii.gz" --preop-labels "$L" --intraop-image "$I"
+  run "$bad/inputs/text.nii.gz" --preop-image "$P" --preop-labels "$L" --intraop-image "$bad/inputs/text.nii.gz"
+  run "$bad/inputs/truncated.nii.gz" --preop-image "$P" --preop-labels "$L" --intraop-image "$bad/inputs/truncated.nii.gz"
+  run "NaN" --preop-image "$bad/inputs/nan.nii.gz" --preop-labels "$L" --intraop-image "$I"
+  run "another grid" --preop-image "$P" --preop-labels "$bad/inputs/good.nii.gz" --intraop-image "$I"
+  run "not a label map" --preop-image "$P" --preop-labels "$P" --intraop-image "$I"
+  run "$bad/inputs/nan.nii.gz" --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --overlay "fmri=$bad/inputs/nan.nii.gz"
+  run "NAME=FILE" --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --overlay "fmri"
+  printf '{"materials": {"2": {"poisson_ratio": 0.5}}}' > "$bad/config.json"
+  run "poisson_ratio" --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --config "$bad/config.json"
+  run "mesh resolution" --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --mesh-resolution 0.01
+  [ -e "$bad/out" ] && fail "register on bad input left outputs in $bad/out: $(ls "$bad/out")"
+  after=$(checksums "$bad/inputs" "$case_dir")
+  [ "$before" = "$after" ] || fail "inputs were modified"
+  ;;
+
+RegisterNotAvailableYet)
+  out=$work/register-not-yet
+  rm -rf "$out"
+  expect 1 "not available yet" -- "$brainshift" register --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
+    --overlay "fmri=$case_dir/preop_fmri.nii.gz" --output-dir "$out"
+  grep -q "not available yet" "$out/report.json" || fail "report.json does not say which stage is missing"
+  ;;
+
+StagesNotAvailableYet)
+  out=$work/stages-not-yet
+  expect 1 "not available yet" -- "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
+    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
+  expect 1 "not available yet" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out"
+  expect 1 "not available yet" -- "$brainshift" simulate --output-dir "$out" --solver-options "-ksp_type cg"
+  expect 1 "not available yet" -- "$brainshift" bench
+  # Bad input is still bad input when the stage is missing.
+  expect 2 "no such file" -- "$brainshift" mesh --preop-labels "$out/none.nii.gz" --output-dir "$out"
+  ;;
+
+DemoRefusesForeignFolder)
+  out=$work/foreign
+  rm -rf "$out" && mkdir -p "$out"
+  printf '{"stages": {"rigid": {"wall_seconds": 1}}, "warnings": []}\n' > "$out/report.json"
+  expect 2 "another run" -- "$brainshift" demo --size small --output-dir "$out"
+  grep -q '"rigid"' "$out/report.json" || fail "the foreign report was changed"
+  ;;
+
+DemoEndToEnd)
+  for f in report.json evaluation.json case/case.json case/scene.mrml case/landmarks.csv case/preop_image.nii.gz \
+    case/preop_labels.nii.gz case/preop_fmri.nii.gz case/intraop_image.nii.gz case/truth/intraop_labels.nii.gz \
+    case/truth/intraop_to_preop.h5 case/truth/rigid_intraop_to_preop.tfm; do
+    [ -s "$demo/$f" ] || fail "demo did not write $f"
+  done
+  find "$demo" -name '.tmp-*' | grep -q . && fail "temporary files left in $demo"
+  float_check "$demo/evaluation.json" "['transforms']['truth']['mean_mm']" "< 0.02"
+  float_check "$demo/evaluation.json" "['transforms']['identity']['mean_mm']" "> 8"
+  float_check "$demo/report.json" "['demo']['case_seconds']" "> 0"
+  grep -q "not available yet" "$demo/report.json" || fail "the demo report does not name the missing stages"
+  ;;
+
+*)
+  echo "unknown case $case_name" >&2
+  exit 2
+  ;;
+esac
+
+if [ "$failures" -ne 0 ]; then
+  echo "$case_name: $failures check(s) failed" >&2
+  exit 1
+fi
+echo "$case_name passed"

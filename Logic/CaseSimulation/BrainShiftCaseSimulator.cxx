@@ -1,0 +1,986 @@
+#include "BrainShiftCaseSimulator.h"
+
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+#include "VolumeIO.h"
+
+#include <itkCompositeTransform.h>
+#include <itkConnectedComponentImageFilter.h>
+#include <itkDisplacementFieldTransform.h>
+#include <itkEuler3DTransform.h>
+#include <itkMultiThreaderBase.h>
+#include <itkRelabelComponentImageFilter.h>
+#include <itkSignedMaurerDistanceMapImageFilter.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+
+namespace {
+
+using MaskImage = itk::Image<unsigned char, 3>;
+using Vec3 = std::array<double, 3>;
+
+enum Label : LabelPixel { Background = 0, Head = 1, Parenchyma = 2, Ventricles = 3, Tumour = 4 };
+
+Vec3 operator+(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3 operator-(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3 operator*(double s, const Vec3& a) { return {s * a[0], s * a[1], s * a[2]}; }
+double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+Vec3 normalized(const Vec3& a) { return (1.0 / norm(a)) * a; }
+Vec3 toVec(const PhysicalPoint& p) { return {p[0], p[1], p[2]}; }
+PhysicalPoint toPoint(const Vec3& v)
+{
+  PhysicalPoint p;
+  for (int i = 0; i < 3; ++i) p[i] = v[i];
+  return p;
+}
+
+/// The index <-> physical mapping of an image grid, for fast loops without virtual calls.
+struct Grid {
+  std::array<std::size_t, 3> size{};
+  Vec3 spacing{}, origin{};
+  double direction[3][3]{};
+
+  template <class TImage>
+  static Grid of(const TImage* image)
+  {
+    Grid g;
+    for (int i = 0; i < 3; ++i) {
+      g.size[i] = image->GetLargestPossibleRegion().GetSize()[i];
+      g.spacing[i] = image->GetSpacing()[i];
+      g.origin[i] = image->GetOrigin()[i];
+      for (int j = 0; j < 3; ++j) g.direction[i][j] = image->GetDirection()(i, j);
+    }
+    return g;
+  }
+  std::size_t count() const { return size[0] * size[1] * size[2]; }
+  std::size_t offset(std::size_t i, std::size_t j, std::size_t k) const { return i + size[0] * (j + size[1] * k); }
+  std::array<std::size_t, 3> indexOf(std::size_t offset) const
+  {
+    return {offset % size[0], (offset / size[0]) % size[1], offset / (size[0] * size[1])};
+  }
+  Vec3 point(double i, double j, double k) const
+  {
+    const double idx[3] = {i * spacing[0], j * spacing[1], k * spacing[2]};
+    Vec3 p = origin;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) p[r] += direction[r][c] * idx[c];
+    }
+    return p;
+  }
+  Vec3 pointOf(std::size_t offset) const
+  {
+    const auto idx = indexOf(offset);
+    return point(double(idx[0]), double(idx[1]), double(idx[2]));
+  }
+  Vec3 continuousIndex(const Vec3& p) const
+  {
+    const Vec3 d = p - origin;
+    Vec3 idx{};
+    for (int c = 0; c < 3; ++c) {
+      double s = 0;
+      for (int r = 0; r < 3; ++r) s += direction[r][c] * d[r];
+      idx[c] = s / spacing[c];
+    }
+    return idx;
+  }
+  template <class TImage>
+  void applyTo(TImage* image) const
+  {
+    typename TImage::RegionType region;
+    typename TImage::SizeType s;
+    typename TImage::SpacingType sp;
+    typename TImage::PointType o;
+    typename TImage::DirectionType d;
+    for (int i = 0; i < 3; ++i) {
+      s[i] = size[i];
+      sp[i] = spacing[i];
+      o[i] = origin[i];
+      for (int j = 0; j < 3; ++j) d(i, j) = direction[i][j];
+    }
+    region.SetSize(s);
+    image->SetRegions(region);
+    image->SetSpacing(sp);
+    image->SetOrigin(o);
+    image->SetDirection(d);
+    image->Allocate();
+  }
+};
+
+template <class TImage>
+typename TImage::Pointer newImage(const Grid& grid, typename TImage::PixelType fill)
+{
+  auto image = TImage::New();
+  grid.applyTo(image.GetPointer());
+  image->FillBuffer(fill);
+  return image;
+}
+
+/// Trilinear interpolation of a scalar buffer; `outside` beyond the grid.
+template <class T>
+double sampleLinear(const Grid& g, const T* data, const Vec3& p, double outside)
+{
+  const Vec3 c = g.continuousIndex(p);
+  std::size_t base[3];
+  double f[3];
+  for (int i = 0; i < 3; ++i) {
+    if (!(c[i] >= 0.0) || c[i] > double(g.size[i] - 1)) return outside;
+    const double fl = std::min(std::floor(c[i]), double(g.size[i] >= 2 ? g.size[i] - 2 : 0));
+    base[i] = std::size_t(fl);
+    f[i] = c[i] - fl;
+  }
+  double value = 0;
+  for (int corner = 0; corner < 8; ++corner) {
+    const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+    const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    if (w == 0) continue;
+    value += w * double(data[g.offset(base[0] + dx, base[1] + dy, base[2] + dz)]);
+  }
+  return value;
+}
+
+template <class T>
+T sampleNearest(const Grid& g, const T* data, const Vec3& p, T outside)
+{
+  const Vec3 c = g.continuousIndex(p);
+  std::size_t idx[3];
+  for (int i = 0; i < 3; ++i) {
+    const double r = std::round(c[i]);
+    if (r < 0 || r > double(g.size[i] - 1)) return outside;
+    idx[i] = std::size_t(r);
+  }
+  return data[g.offset(idx[0], idx[1], idx[2])];
+}
+
+/// The displacement w on the field grid (double vectors), trilinear; zero outside.
+Vec3 sampleField(const Grid& g, const itk::Vector<double, 3>* field, const Vec3& p)
+{
+  const Vec3 c = g.continuousIndex(p);
+  std::size_t base[3];
+  double f[3];
+  for (int i = 0; i < 3; ++i) {
+    if (!(c[i] >= 0.0) || c[i] > double(g.size[i] - 1)) return {0, 0, 0};
+    const double fl = std::min(std::floor(c[i]), double(g.size[i] - 2));
+    base[i] = std::size_t(fl);
+    f[i] = c[i] - fl;
+  }
+  Vec3 value{0, 0, 0};
+  for (int corner = 0; corner < 8; ++corner) {
+    const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+    const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    const auto& v = field[g.offset(base[0] + dx, base[1] + dy, base[2] + dz)];
+    for (int k = 0; k < 3; ++k) value[k] += w * v[k];
+  }
+  return value;
+}
+
+void parallelFor(std::size_t count, const std::function<void(std::size_t)>& body)
+{
+  auto threader = itk::MultiThreaderBase::New();
+  threader->ParallelizeArray(0, count, body, nullptr);
+}
+
+/// A counter-based hash in [0, 1): deterministic texture independent of thread order.
+double hashUniform(std::uint64_t seed, std::uint64_t i)
+{
+  std::uint64_t z = seed * 0x9E3779B97F4A7C15ull + i + 0x632BE59BD9B4E019ull;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  z ^= z >> 31;
+  return double(z >> 11) * (1.0 / 9007199254740992.0);
+}
+
+// ---- Masks --------------------------------------------------------------------------------
+MaskImage::Pointer largestComponent(const MaskImage* mask)
+{
+  auto components = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
+  components->SetInput(mask);
+  auto relabel = itk::RelabelComponentImageFilter<itk::Image<unsigned, 3>, itk::Image<unsigned, 3>>::New();
+  relabel->SetInput(components->GetOutput());
+  relabel->Update();
+  auto out = MaskImage::New();
+  out->CopyInformation(mask);
+  out->SetRegions(mask->GetLargestPossibleRegion());
+  out->Allocate();
+  const unsigned* in = relabel->GetOutput()->GetBufferPointer();
+  const std::size_t n = mask->GetLargestPossibleRegion().GetNumberOfPixels();
+  for (std::size_t i = 0; i < n; ++i) out->GetBufferPointer()[i] = in[i] == 1 ? 1 : 0;
+  return out;
+}
+
+/// Signed distance in mm to the mask's boundary: negative inside.
+ScalarImage::Pointer signedDistance(const MaskImage* mask)
+{
+  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
+  distance->SetInput(mask);
+  distance->SetUseImageSpacing(true);
+  distance->SetSquaredDistance(false);
+  distance->SetInsideIsPositive(false);
+  distance->SetBackgroundValue(0);
+  distance->Update();
+  ScalarImage::Pointer out = distance->GetOutput();
+  out->DisconnectPipeline();
+  return out;
+}
+
+/// Fills the holes of each axial slice (background not connected to the slice's border).
+void fillHolesPerSlice(MaskImage* mask, const Grid& g)
+{
+  unsigned char* m = mask->GetBufferPointer();
+  std::vector<unsigned char> outside(g.size[0] * g.size[1]);
+  std::vector<std::size_t> stack;
+  for (std::size_t k = 0; k < g.size[2]; ++k) {
+    std::fill(outside.begin(), outside.end(), 0);
+    auto at = [&](std::size_t i, std::size_t j) { return m[g.offset(i, j, k)]; };
+    auto push = [&](std::size_t i, std::size_t j) {
+      const std::size_t o = i + g.size[0] * j;
+      if (!outside[o] && !at(i, j)) {
+        outside[o] = 1;
+        stack.push_back(o);
+      }
+    };
+    for (std::size_t i = 0; i < g.size[0]; ++i) {
+      push(i, 0);
+      push(i, g.size[1] - 1);
+    }
+    for (std::size_t j = 0; j < g.size[1]; ++j) {
+      push(0, j);
+      push(g.size[0] - 1, j);
+    }
+    while (!stack.empty()) {
+      const std::size_t o = stack.back();
+      stack.pop_back();
+      const std::size_t i = o % g.size[0], j = o / g.size[0];
+      if (i > 0) push(i - 1, j);
+      if (i + 1 < g.size[0]) push(i + 1, j);
+      if (j > 0) push(i, j - 1);
+      if (j + 1 < g.size[1]) push(i, j + 1);
+    }
+    for (std::size_t j = 0; j < g.size[1]; ++j) {
+      for (std::size_t i = 0; i < g.size[0]; ++i) {
+        if (!outside[i + g.size[0] * j]) m[g.offset(i, j, k)] = 1;
+      }
+    }
+  }
+}
+
+/// Otsu thresholds for `classes` classes of the values selected by `mask` (256 bins over [lo, hi]).
+std::vector<double> otsuThresholds(const float* values, const unsigned char* mask, std::size_t n, int classes,
+                                   double lo, double hi)
+{
+  constexpr int Bins = 256;
+  std::vector<double> histogram(Bins, 0.0);
+  double total = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (mask && !mask[i]) continue;
+    const int b = std::clamp(int((values[i] - lo) / (hi - lo) * (Bins - 1) + 0.5), 0, Bins - 1);
+    histogram[b] += 1;
+    total += 1;
+  }
+  auto binValue = [&](int b) { return lo + (hi - lo) * b / (Bins - 1); };
+  std::vector<double> p(Bins), cumulative(Bins + 1, 0), cumulativeMean(Bins + 1, 0);
+  for (int b = 0; b < Bins; ++b) {
+    p[b] = histogram[b] / total;
+    cumulative[b + 1] = cumulative[b] + p[b];
+    cumulativeMean[b + 1] = cumulativeMean[b] + p[b] * binValue(b);
+  }
+  auto classScore = [&](int from, int to) { // bins [from, to)
+    const double w = cumulative[to] - cumulative[from];
+    if (w <= 0) return 0.0;
+    const double m = cumulativeMean[to] - cumulativeMean[from];
+    return m * m / w;
+  };
+  double best = -1;
+  std::vector<double> thresholds;
+  if (classes == 2) {
+    for (int t = 1; t < Bins; ++t) {
+      const double score = classScore(0, t) + classScore(t, Bins);
+      if (score > best) {
+        best = score;
+        thresholds = {binValue(t)};
+      }
+    }
+  } else {
+    for (int t1 = 1; t1 < Bins - 1; ++t1) {
+      for (int t2 = t1 + 1; t2 < Bins; ++t2) {
+        const double score = classScore(0, t1) + classScore(t1, t2) + classScore(t2, Bins);
+        if (score > best) {
+          best = score;
+          thresholds = {binValue(t1), binValue(t2)};
+        }
+      }
+    }
+  }
+  return thresholds;
+}
+
+/// Averages blocks of 2x2x2 voxels: the anti-aliased 2 mm version of a 1 mm image.
+ScalarImage::Pointer downsampleByTwo(const ScalarImage* image)
+{
+  const Grid in = Grid::of(image);
+  Grid out = in;
+  for (int i = 0; i < 3; ++i) {
+    out.size[i] = (in.size[i] + 1) / 2;
+    out.spacing[i] = in.spacing[i] * 2;
+  }
+  out.origin = in.point(0.5, 0.5, 0.5);
+  auto result = newImage<ScalarImage>(out, 0.0f);
+  const float* src = image->GetBufferPointer();
+  float* dst = result->GetBufferPointer();
+  parallelFor(out.size[2], [&](std::size_t k) {
+    for (std::size_t j = 0; j < out.size[1]; ++j) {
+      for (std::size_t i = 0; i < out.size[0]; ++i) {
+        double sum = 0;
+        int count = 0;
+        for (int c = 0; c < 8; ++c) {
+          const std::size_t ii = 2 * i + (c & 1), jj = 2 * j + ((c >> 1) & 1), kk = 2 * k + ((c >> 2) & 1);
+          if (ii < in.size[0] && jj < in.size[1] && kk < in.size[2]) {
+            sum += src[in.offset(ii, jj, kk)];
+            ++count;
+          }
+        }
+        dst[out.offset(i, j, k)] = float(sum / count);
+      }
+    }
+  });
+  return result;
+}
+
+Vec3 craniotomyDirection(CraniotomySite site)
+{
+  // Outward directions in LPS (x: left, y: posterior, z: superior).
+  switch (site) {
+  case CraniotomySite::RightFrontal: return normalized({-0.55, -0.55, 0.63});
+  case CraniotomySite::LeftFrontal: return normalized({0.55, -0.55, 0.63});
+  case CraniotomySite::RightParietal: return normalized({-0.6, 0.35, 0.72});
+  case CraniotomySite::LeftParietal: return normalized({0.6, 0.35, 0.72});
+  case CraniotomySite::Vertex: return normalized({0.0, 0.05, 1.0});
+  }
+  return {0, 0, 1};
+}
+
+/// Picks up to `count` candidates in random (seeded) order, each at least `separation` mm from
+/// every point already chosen (including `taken`).
+std::vector<Vec3> pickSeparated(std::vector<Vec3> candidates, std::size_t count, double separation,
+                                std::vector<Vec3>& taken, std::mt19937_64& rng)
+{
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  std::vector<Vec3> chosen;
+  for (const Vec3& c : candidates) {
+    if (chosen.size() == count) break;
+    bool farEnough = true;
+    for (const Vec3& t : taken) {
+      if (norm(c - t) < separation) {
+        farEnough = false;
+        break;
+      }
+    }
+    if (!farEnough) continue;
+    chosen.push_back(c);
+    taken.push_back(c);
+  }
+  return chosen;
+}
+
+} // namespace
+
+// ---- Parameters ---------------------------------------------------------------------------
+std::string toString(CraniotomySite site)
+{
+  switch (site) {
+  case CraniotomySite::RightFrontal: return "right-frontal";
+  case CraniotomySite::LeftFrontal: return "left-frontal";
+  case CraniotomySite::RightParietal: return "right-parietal";
+  case CraniotomySite::LeftParietal: return "left-parietal";
+  case CraniotomySite::Vertex: return "vertex";
+  }
+  return "";
+}
+
+CraniotomySite craniotomySiteFromString(const std::string& text)
+{
+  for (auto site : {CraniotomySite::RightFrontal, CraniotomySite::LeftFrontal, CraniotomySite::RightParietal,
+                    CraniotomySite::LeftParietal, CraniotomySite::Vertex}) {
+    if (toString(site) == text) return site;
+  }
+  throw InputError("--craniotomy: '" + text +
+                   "' is not a site (right-frontal, left-frontal, right-parietal, left-parietal, vertex)");
+}
+
+void CaseParameters::validate() const
+{
+  auto require = [](bool ok, const std::string& message) {
+    if (!ok) throw InputError(message);
+  };
+  require(std::isfinite(shiftMillimetres) && shiftMillimetres >= 0 && shiftMillimetres <= 25,
+          "--shift: " + std::to_string(shiftMillimetres) + " mm is outside 0 to 25 mm");
+  for (double r : rotationDegrees) {
+    require(std::isfinite(r) && std::abs(r) <= 45, "--rotation: each angle must be within +-45 degrees");
+  }
+  for (double t : translationMillimetres) {
+    require(std::isfinite(t) && std::abs(t) <= 50, "--translation: each component must be within +-50 mm");
+  }
+  require(std::isfinite(noiseFraction) && noiseFraction >= 0 && noiseFraction <= 0.5,
+          "--noise: the noise fraction must be within 0 to 0.5");
+  require(std::isfinite(biasStrength) && biasStrength >= 0 && biasStrength <= 1,
+          "--bias: the bias strength must be within 0 to 1");
+}
+
+CaseFiles::CaseFiles(const fs::path& caseFolder)
+  : folder(caseFolder)
+  , preopImage(caseFolder / "preop_image.nii.gz")
+  , preopLabels(caseFolder / "preop_labels.nii.gz")
+  , preopFmri(caseFolder / "preop_fmri.nii.gz")
+  , intraopImage(caseFolder / "intraop_image.nii.gz")
+  , landmarks(caseFolder / "landmarks.csv")
+  , truthIntraopLabels(caseFolder / "truth" / "intraop_labels.nii.gz")
+  , truthTransform(caseFolder / "truth" / "intraop_to_preop.h5")
+  , truthRigidTransform(caseFolder / "truth" / "rigid_intraop_to_preop.tfm")
+  , description(caseFolder / "case.json")
+{
+}
+
+// ---- The simulation -----------------------------------------------------------------------
+SimulatedCase simulateCase(const CaseParameters& P)
+{
+  P.validate();
+  const bool small = P.size == CaseSize::Small;
+  const fs::path t1Path = P.templateFolder / "ch2.nii.gz";
+  const fs::path betPath = P.templateFolder / "ch2bet.nii.gz";
+  for (const fs::path& path : {t1Path, betPath}) {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) {
+      throw InputError(path.string() + ": the Colin27 template is missing (install the Debian package mricron-data)");
+    }
+  }
+  ScalarImage::Pointer t1 = readScalarVolume(t1Path);
+  ScalarImage::Pointer bet = readScalarVolume(betPath);
+  if (!ImageGeometry::of(t1.GetPointer()).sameGridAs(ImageGeometry::of(bet.GetPointer()))) {
+    throw InputError(betPath.string() + ": not on the grid of " + t1Path.string());
+  }
+  {
+    // The brain-extracted image as a 0/1 mask before any downsampling.
+    float* b = bet->GetBufferPointer();
+    for (std::size_t i = 0, n = bet->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) b[i] = b[i] > 0 ? 1.f : 0.f;
+  }
+  if (small) {
+    t1 = downsampleByTwo(t1);
+    bet = downsampleByTwo(bet);
+  }
+  const Grid G = Grid::of(t1.GetPointer());
+  const std::size_t N = G.count();
+  const double voxelMl = G.spacing[0] * G.spacing[1] * G.spacing[2] / 1000.0;
+  std::mt19937_64 rng(P.seed);
+  SimulatedCase result;
+  CaseFigures& figures = result.figures;
+
+  // -- Brain and head masks.
+  auto brainMask = newImage<MaskImage>(G, 0);
+  for (std::size_t i = 0; i < N; ++i) brainMask->GetBufferPointer()[i] = bet->GetBufferPointer()[i] >= 0.5f;
+  brainMask = largestComponent(brainMask);
+  fillHolesPerSlice(brainMask, G);
+  const unsigned char* brain = brainMask->GetBufferPointer();
+
+  const float* intensity = t1->GetBufferPointer();
+  const float maxIntensity = *std::max_element(intensity, intensity + N);
+  const double headThreshold = 0.5 * otsuThresholds(intensity, nullptr, N, 2, 0, maxIntensity)[0];
+  auto headMask = newImage<MaskImage>(G, 0);
+  for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = intensity[i] > headThreshold || brain[i];
+  headMask = largestComponent(headMask);
+  {
+    // Close small gaps (2 mm) so that the skull, dark in T1, is enclosed by the scalp.
+    ScalarImage::Pointer outside = signedDistance(headMask);
+    auto dilated = newImage<MaskImage>(G, 0);
+    for (std::size_t i = 0; i < N; ++i) dilated->GetBufferPointer()[i] = outside->GetBufferPointer()[i] <= 2.0f;
+    ScalarImage::Pointer inside = signedDistance(dilated);
+    for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = inside->GetBufferPointer()[i] <= -2.0f || brain[i];
+  }
+  fillHolesPerSlice(headMask, G);
+  const unsigned char* head = headMask->GetBufferPointer();
+
+  // -- Tissue intensities: CSF, grey and white matter by three-class Otsu inside the brain.
+  const std::vector<double> brainThresholds = otsuThresholds(intensity, brain, N, 3, 0, maxIntensity);
+  double classSum[3] = {0, 0, 0}, classCount[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < N; ++i) {
+    if (!brain[i]) continue;
+    const int c = intensity[i] < brainThresholds[0] ? 0 : intensity[i] < brainThresholds[1] ? 1 : 2;
+    classSum[c] += intensity[i];
+    classCount[c] += 1;
+  }
+  const double csfMean = classSum[0] / classCount[0], greyMean = classSum[1] / classCount[1],
+               whiteMean = classSum[2] / classCount[2];
+
+  // -- Ventricles: dark, deep (12 mm inside the brain), near the centre, opened by 1.5 mm so that
+  //    thin sheets of sulcal CSF (the interhemispheric fissure) drop out, in components of 1 ml or more.
+  ScalarImage::Pointer brainDistance = signedDistance(brainMask);
+  const float* brainDepth = brainDistance->GetBufferPointer();
+  Vec3 brainCentroid{0, 0, 0};
+  double brainCount = 0;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (brain[i]) {
+      brainCentroid = brainCentroid + G.pointOf(i);
+      brainCount += 1;
+    }
+  }
+  brainCentroid = (1.0 / brainCount) * brainCentroid;
+  auto ventricleMask = newImage<MaskImage>(G, 0);
+  const double csfThreshold = 0.5 * (csfMean + greyMean);
+  for (std::size_t i = 0; i < N; ++i) {
+    ventricleMask->GetBufferPointer()[i] = brain[i] && brainDepth[i] <= -12.0f && intensity[i] < csfThreshold &&
+                                           norm(G.pointOf(i) - brainCentroid) < 40.0;
+  }
+  {
+    const double radius = 1.5;
+    ScalarImage::Pointer toDark = signedDistance(ventricleMask);
+    auto eroded = newImage<MaskImage>(G, 0);
+    for (std::size_t i = 0; i < N; ++i) eroded->GetBufferPointer()[i] = toDark->GetBufferPointer()[i] <= -radius + 1e-3;
+    ScalarImage::Pointer toEroded = signedDistance(eroded);
+    for (std::size_t i = 0; i < N; ++i) {
+      ventricleMask->GetBufferPointer()[i] = ventricleMask->GetBufferPointer()[i] && toEroded->GetBufferPointer()[i] <= radius + 1e-3;
+    }
+    auto components = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
+    components->SetInput(ventricleMask);
+    auto relabel = itk::RelabelComponentImageFilter<itk::Image<unsigned, 3>, itk::Image<unsigned, 3>>::New();
+    relabel->SetInput(components->GetOutput());
+    relabel->SetMinimumObjectSize(std::max<itk::SizeValueType>(1, itk::SizeValueType(1.0 / voxelMl)));
+    relabel->Update();
+    const unsigned* component = relabel->GetOutput()->GetBufferPointer();
+    for (std::size_t i = 0; i < N; ++i) ventricleMask->GetBufferPointer()[i] = component[i] >= 1 && component[i] <= 4;
+  }
+  const unsigned char* ventricles = ventricleMask->GetBufferPointer();
+
+  // -- The craniotomy: where the outward ray from the brain's centroid leaves the brain.
+  const Vec3 axis = craniotomyDirection(P.craniotomy);
+  Vec3 craniotomyCentre = brainCentroid;
+  for (double t = 0; t < 150; t += 0.25) {
+    const Vec3 p = brainCentroid + t * axis;
+    if (sampleNearest<unsigned char>(G, brain, p, 0)) craniotomyCentre = p;
+  }
+  const double lateralSigma = 25.0, decayLength = 35.0, openingRadius = 30.0;
+
+  // -- The tumour: an irregular ellipsoid 22 mm below the craniotomy, with a T1 post-contrast look
+  //    (hypointense core, enhancing rim).
+  const Vec3 tumourCentre = craniotomyCentre - 22.0 * axis;
+  const Vec3 semiAxes{13.0, 10.5, 10.0};
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  double harmonics[6];
+  for (double& h : harmonics) h = 0.1 * uniform(rng);
+  const Vec3 e1 = normalized({-axis[1], axis[0], 0.0 + 1e-9});
+  const Vec3 e2 = {axis[1] * e1[2] - axis[2] * e1[1], axis[2] * e1[0] - axis[0] * e1[2], axis[0] * e1[1] - axis[1] * e1[0]};
+  auto tumourRadius = [&](const Vec3& p) { // < 1 inside
+    const Vec3 d = p - tumourCentre;
+    const Vec3 local{dot(d, e1) / semiAxes[0], dot(d, e2) / semiAxes[1], dot(d, axis) / semiAxes[2]};
+    const double rho = norm(local);
+    if (rho < 1e-9) return 0.0;
+    const double theta = std::acos(std::clamp(local[2] / rho, -1.0, 1.0)), phi = std::atan2(local[1], local[0]);
+    const double bump = harmonics[0] * std::cos(2 * phi) + harmonics[1] * std::sin(3 * phi) +
+                        harmonics[2] * std::cos(2 * theta) + harmonics[3] * std::sin(theta) * std::cos(phi) +
+                        harmonics[4] * std::cos(3 * theta) + harmonics[5] * std::sin(2 * phi) * std::sin(theta);
+    return rho / (1.0 + bump);
+  };
+
+  // -- Preoperative labels and image.
+  result.preopLabels = newImage<LabelImage>(G, Background);
+  result.preopImage = newImage<ScalarImage>(G, 0.0f);
+  LabelPixel* labels = result.preopLabels->GetBufferPointer();
+  float* preop = result.preopImage->GetBufferPointer();
+  const double meanAxis = (semiAxes[0] + semiAxes[1] + semiAxes[2]) / 3.0;
+  parallelFor(N, [&](std::size_t i) {
+    const Vec3 p = G.pointOf(i);
+    LabelPixel label = brain[i] ? Parenchyma : head[i] ? Head : Background;
+    if (brain[i] && ventricles[i]) label = Ventricles;
+    double value = intensity[i];
+    if (brain[i] && brainDepth[i] <= -3.0f) {
+      const double rho = tumourRadius(p);
+      // Partial volume over about 1 mm at the tumour's edge.
+      const double alpha = std::clamp(0.5 + (1.0 - rho) * meanAxis / 1.0, 0.0, 1.0);
+      if (alpha > 0) {
+        const double texture = 1.0 + 0.05 * (2.0 * hashUniform(P.seed, i) - 1.0);
+        const double rim = std::clamp((rho - 0.7) / 0.15, 0.0, 1.0);
+        const double tumourValue = texture * (0.45 * whiteMean + rim * (1.1 - 0.45) * whiteMean);
+        value = (1 - alpha) * value + alpha * tumourValue;
+      }
+      if (rho <= 1.0) label = Tumour;
+    }
+    labels[i] = label;
+    preop[i] = float(value);
+  });
+
+  // -- fMRI: a t-map on a 3 mm grid, two activations near the tumour and one deactivation.
+  {
+    Grid F = G;
+    const Vec3 extent{G.spacing[0] * G.size[0], G.spacing[1] * G.size[1], G.spacing[2] * G.size[2]};
+    for (int i = 0; i < 3; ++i) {
+      F.spacing[i] = 3.0;
+      F.size[i] = std::size_t(std::ceil(extent[i] / 3.0));
+    }
+    F.origin = G.point(-0.5 + 1.5 / G.spacing[0], -0.5 + 1.5 / G.spacing[1], -0.5 + 1.5 / G.spacing[2]);
+    result.preopFmri = newImage<ScalarImage>(F, 0.0f);
+    float* t = result.preopFmri->GetBufferPointer();
+    // Cortical points: surface points in directions tilted from the craniotomy axis, 6 mm deep.
+    auto corticalPoint = [&](const Vec3& direction) {
+      Vec3 surface = brainCentroid;
+      for (double s = 0; s < 150; s += 0.5) {
+        const Vec3 p = brainCentroid + s * direction;
+        if (sampleNearest<unsigned char>(G, brain, p, 0)) surface = p;
+      }
+      return surface - 6.0 * direction;
+    };
+    const Vec3 motor = corticalPoint(normalized(axis + Vec3{0, 0.45, 0.1}));
+    const Vec3 language = corticalPoint(normalized(axis + Vec3{0, -0.2, -0.45}));
+    const Vec3 deactivation = corticalPoint(normalized(Vec3{-axis[0], 0.8, 0.3}));
+    struct Blob { Vec3 centre; double peak, sigma; };
+    const Blob blobs[] = {{motor, 9.0, 5.0}, {language, 6.5, 4.0}, {deactivation, -4.5, 6.0}};
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    std::vector<double> noise(F.count());
+    for (double& v : noise) v = gauss(rng);
+    for (std::size_t i = 0; i < F.count(); ++i) {
+      const Vec3 p = F.pointOf(i);
+      if (!sampleNearest<unsigned char>(G, brain, p, 0)) continue;
+      double value = 0.8 * noise[i];
+      for (const Blob& b : blobs) {
+        const double d = norm(p - b.centre);
+        value += b.peak * std::exp(-d * d / (2 * b.sigma * b.sigma));
+      }
+      t[i] = float(value);
+    }
+  }
+
+  // -- The subsidence field w on a 4 mm grid over the preoperative field of view: smooth on the
+  //    scale of its 25 mm profile, and small enough to keep in the truth transform file.
+  Grid W = G;
+  {
+    const Vec3 extent{G.spacing[0] * (G.size[0] - 1), G.spacing[1] * (G.size[1] - 1), G.spacing[2] * (G.size[2] - 1)};
+    for (int i = 0; i < 3; ++i) {
+      W.spacing[i] = 4.0;
+      W.size[i] = std::size_t(std::ceil(extent[i] / 4.0)) + 1;
+    }
+    W.origin = G.origin;
+  }
+  using DoubleField = itk::Image<itk::Vector<double, 3>, 3>;
+  auto field = DoubleField::New();
+  W.applyTo(field.GetPointer());
+  itk::Vector<double, 3>* w = field->GetBufferPointer();
+  auto sinking = [&](const Vec3& p) { // the analytic model, outward along the axis
+    const Vec3 d = p - craniotomyCentre;
+    const double along = dot(d, axis);
+    const double depth = -along; // below the preoperative surface point
+    const double r2 = dot(d, d) - along * along;
+    const double subsidence = P.shiftMillimetres * std::exp(-r2 / (2 * lateralSigma * lateralSigma));
+    return subsidence * std::exp(-std::max(depth - subsidence, 0.0) / decayLength);
+  };
+  for (std::size_t i = 0; i < W.count(); ++i) {
+    const double s = sinking(W.pointOf(i));
+    for (int k = 0; k < 3; ++k) w[i][k] = s * axis[k];
+  }
+
+  // -- The deformed configuration on the preoperative grid.
+  auto deformedLabels = newImage<LabelImage>(G, Background);
+  auto deformedImage = newImage<ScalarImage>(G, 0.0f);
+  LabelPixel* dLabels = deformedLabels->GetBufferPointer();
+  float* dImage = deformedImage->GetBufferPointer();
+  parallelFor(N, [&](std::size_t i) {
+    const Vec3 p = G.pointOf(i);
+    if (brain[i]) {
+      const Vec3 source = p + sampleField(W, w, p);
+      const LabelPixel sourceLabel = sampleNearest<LabelPixel>(G, labels, source, Background);
+      if (sourceLabel >= Parenchyma) {
+        dLabels[i] = sourceLabel;
+        dImage[i] = float(sampleLinear(G, preop, source, 0.0));
+      } else { // the gap between the skull and the sunken brain: fluid and air
+        dLabels[i] = Background;
+        dImage[i] = float(0.6 * csfMean);
+      }
+      if (P.resection && dLabels[i] == Tumour) { // the cavity, filled with fluid
+        dLabels[i] = Background;
+        dImage[i] = float(csfMean);
+      }
+      return;
+    }
+    const Vec3 d = p - craniotomyCentre;
+    const double along = dot(d, axis);
+    if (head[i] && along > 0 && dot(d, d) - along * along < openingRadius * openingRadius) {
+      dLabels[i] = Background; // the bone flap and scalp are open
+      dImage[i] = 0.0f;
+      return;
+    }
+    dLabels[i] = labels[i];
+    dImage[i] = preop[i];
+  });
+
+  // -- The patient in the scanner: intraop point y = M(x'); the truth maps y back.
+  auto motion = itk::Euler3DTransform<double>::New();
+  {
+    Vec3 headCentre{0, 0, 0};
+    double count = 0;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (head[i]) {
+        headCentre = headCentre + G.pointOf(i);
+        count += 1;
+      }
+    }
+    headCentre = (1.0 / count) * headCentre;
+    itk::Euler3DTransform<double>::CenterType centre;
+    itk::Euler3DTransform<double>::OutputVectorType translation;
+    for (int k = 0; k < 3; ++k) {
+      centre[k] = headCentre[k];
+      translation[k] = P.translationMillimetres[k];
+    }
+    motion->SetCenter(centre);
+    const double toRadians = M_PI / 180.0;
+    motion->SetRotation(P.rotationDegrees[0] * toRadians, P.rotationDegrees[1] * toRadians,
+                        P.rotationDegrees[2] * toRadians);
+    motion->SetTranslation(translation);
+  }
+  auto rigid = itk::Euler3DTransform<double>::New();
+  motion->GetInverse(rigid);
+  result.rigidIntraopToPreop = rigid.GetPointer();
+  {
+    auto composite = itk::CompositeTransform<double, 3>::New();
+    auto fieldTransform = itk::DisplacementFieldTransform<double, 3>::New();
+    fieldTransform->SetDisplacementField(field);
+    composite->AddTransform(fieldTransform); // applied second
+    composite->AddTransform(rigid);          // applied first
+    result.intraopToPreop = composite.GetPointer();
+  }
+  auto rigidPoint = [&](const Vec3& y) {
+    return toVec(rigid->TransformPoint(toPoint(y)));
+  };
+
+  // -- The intraoperative grid: axial, centred on the moved brain.
+  Grid I;
+  I.size = small ? std::array<std::size_t, 3>{96, 96, 30} : std::array<std::size_t, 3>{256, 256, 60};
+  I.spacing = small ? Vec3{2.5, 2.5, 5.0} : Vec3{0.9375, 0.9375, 2.5};
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) I.direction[r][c] = r == c ? 1.0 : 0.0;
+  }
+  {
+    const Vec3 centre = toVec(motion->TransformPoint(toPoint(brainCentroid + Vec3{0, 0, 10})));
+    for (int k = 0; k < 3; ++k) I.origin[k] = centre[k] - 0.5 * I.spacing[k] * (I.size[k] - 1);
+  }
+  const std::size_t NI = I.count();
+  result.intraopImage = newImage<ScalarImage>(I, 0.0f);
+  result.intraopLabels = newImage<LabelImage>(I, Background);
+  float* intraop = result.intraopImage->GetBufferPointer();
+  LabelPixel* intraopLabels = result.intraopLabels->GetBufferPointer();
+  // The bias field: exp(strength * q) with q a random quadratic over the field of view, |q| <= 1.
+  double coefficients[9];
+  {
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    for (double& c : coefficients) c = gauss(rng);
+  }
+  auto quadratic = [&](const Vec3& u) {
+    const double terms[9] = {u[0], u[1], u[2], u[0] * u[0], u[1] * u[1], u[2] * u[2], u[0] * u[1], u[0] * u[2], u[1] * u[2]};
+    double q = 0;
+    for (int k = 0; k < 9; ++k) q += coefficients[k] * terms[k];
+    return q;
+  };
+  double biasScale = 1e-12;
+  for (int a = -4; a <= 4; ++a) {
+    for (int b = -4; b <= 4; ++b) {
+      for (int c = -4; c <= 4; ++c) biasScale = std::max(biasScale, std::abs(quadratic({a / 4.0, b / 4.0, c / 4.0})));
+    }
+  }
+  const Grid Gd = G;
+  const float* deformed = dImage;
+  parallelFor(NI, [&](std::size_t i) {
+    const auto idx = I.indexOf(i);
+    double sum = 0;
+    // The slice profile: three samples across the slice thickness.
+    for (double dz : {-1.0 / 3.0, 0.0, 1.0 / 3.0}) {
+      const Vec3 y = I.point(double(idx[0]), double(idx[1]), double(idx[2]) + dz);
+      sum += sampleLinear(Gd, deformed, rigidPoint(y), 0.0);
+    }
+    const Vec3 y = I.point(double(idx[0]), double(idx[1]), double(idx[2]));
+    intraopLabels[i] = sampleNearest<LabelPixel>(Gd, dLabels, rigidPoint(y), Background);
+    // Another scanner, another contrast: a gamma on the white-matter-normalised intensity.
+    const double normalisedValue = std::max(sum / 3.0, 0.0) / whiteMean;
+    const Vec3 u{2.0 * idx[0] / (I.size[0] - 1) - 1.0, 2.0 * idx[1] / (I.size[1] - 1) - 1.0,
+                 2.0 * idx[2] / (I.size[2] - 1) - 1.0};
+    const double bias = std::exp(P.biasStrength * quadratic(u) / biasScale);
+    intraop[i] = float(1000.0 * std::pow(normalisedValue, 0.85) * bias);
+  });
+  {
+    // Rician noise, drawn in voxel order from the seeded generator.
+    std::normal_distribution<double> gauss(0.0, P.noiseFraction * 1000.0);
+    for (std::size_t i = 0; i < NI; ++i) {
+      const double real = intraop[i] + gauss(rng), imaginary = gauss(rng);
+      intraop[i] = float(std::round(std::sqrt(real * real + imaginary * imaginary)));
+    }
+  }
+
+  // -- Figures.
+  figures.craniotomyCentre = toPoint(craniotomyCentre);
+  figures.craniotomyAxis = axis;
+  figures.tumourCentre = toPoint(tumourCentre);
+  figures.decayLengthMm = decayLength;
+  figures.lateralSigmaMm = lateralSigma;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (labels[i] == Tumour) figures.tumourVolumeMl += voxelMl;
+    if (labels[i] == Ventricles) figures.ventricleVolumeMl += voxelMl;
+    if (labels[i] >= Parenchyma) figures.brainVolumeMl += voxelMl;
+    if (brain[i] && dLabels[i] == Background) {
+      const Vec3 source = G.pointOf(i) + sampleField(W, w, G.pointOf(i));
+      if (sampleNearest<LabelPixel>(G, labels, source, Background) == Tumour) figures.cavityVolumeMl += voxelMl;
+      else figures.gapVolumeMl += voxelMl;
+    }
+    if (dLabels[i] >= Parenchyma) figures.maxBrainDisplacementMm = std::max(figures.maxBrainDisplacementMm, norm(sampleField(W, w, G.pointOf(i))));
+  }
+  figures.minJacobianDeterminant = 1.0;
+  for (std::size_t k = 1; k + 1 < W.size[2]; ++k) {
+    for (std::size_t j = 1; j + 1 < W.size[1]; ++j) {
+      for (std::size_t i = 1; i + 1 < W.size[0]; ++i) {
+        const Vec3 p = W.point(double(i), double(j), double(k));
+        if (!sampleNearest<unsigned char>(G, brain, p, 0)) continue;
+        // J = I + grad w, by central differences along the grid axes (the grid is axis-aligned
+        // with the preoperative image, whose direction is a signed permutation here).
+        double J[3][3];
+        const std::size_t o[3][2] = {{W.offset(i + 1, j, k), W.offset(i - 1, j, k)},
+                                     {W.offset(i, j + 1, k), W.offset(i, j - 1, k)},
+                                     {W.offset(i, j, k + 1), W.offset(i, j, k - 1)}};
+        double gradIndex[3][3]; // d w_r / d index_c
+        for (int c = 0; c < 3; ++c) {
+          for (int r = 0; r < 3; ++r) gradIndex[r][c] = (w[o[c][0]][r] - w[o[c][1]][r]) / (2.0 * W.spacing[c]);
+        }
+        for (int r = 0; r < 3; ++r) {
+          for (int c = 0; c < 3; ++c) {
+            double g = 0; // d w_r / d x_c = sum_m gradIndex[r][m] * direction[c][m]
+            for (int m = 0; m < 3; ++m) g += gradIndex[r][m] * W.direction[c][m];
+            J[r][c] = (r == c ? 1.0 : 0.0) + g;
+          }
+        }
+        const double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+                           J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+        figures.minJacobianDeterminant = std::min(figures.minJacobianDeterminant, det);
+      }
+    }
+  }
+
+  // -- Landmarks, chosen in the deformed configuration x' (voxel centres), seen at y = M(x').
+  {
+    auto deformedBrainMask = newImage<MaskImage>(G, 0);
+    auto cavityMask = newImage<MaskImage>(G, 0);
+    for (std::size_t i = 0; i < N; ++i) {
+      deformedBrainMask->GetBufferPointer()[i] = dLabels[i] >= Parenchyma;
+      cavityMask->GetBufferPointer()[i] = brain[i] && dLabels[i] == Background && labels[i] != Head &&
+                                          sampleNearest<LabelPixel>(G, labels, G.pointOf(i) + sampleField(W, w, G.pointOf(i)), 0) == Tumour;
+    }
+    ScalarImage::Pointer tissueDepth = signedDistance(deformedBrainMask);
+    ScalarImage::Pointer cavityDistance = signedDistance(cavityMask);
+    const bool hasCavity = figures.cavityVolumeMl > 0;
+    auto insideIntraopView = [&](const Vec3& xPrime) {
+      const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(xPrime))));
+      for (int k = 0; k < 3; ++k) {
+        const double margin = 8.0 / I.spacing[k];
+        if (c[k] < margin || c[k] > double(I.size[k] - 1) - margin) return false;
+      }
+      return true;
+    };
+    std::vector<Vec3> craniotomyCandidates, cavityCandidates, brainCandidates, headCandidates;
+    for (std::size_t i = 0; i < N; ++i) {
+      const LabelPixel l = dLabels[i];
+      const Vec3 p = G.pointOf(i);
+      if (l >= Parenchyma && tissueDepth->GetBufferPointer()[i] <= -3.0f) {
+        if (!insideIntraopView(p)) continue;
+        const Vec3 d = p - craniotomyCentre;
+        const double along = dot(d, axis);
+        const double r = std::sqrt(std::max(dot(d, d) - along * along, 0.0));
+        if (hasCavity && cavityDistance->GetBufferPointer()[i] <= 10.0f) cavityCandidates.push_back(p);
+        else if (r < lateralSigma && -along < 35.0) craniotomyCandidates.push_back(p);
+        else brainCandidates.push_back(p);
+      } else if (l == Head && norm(sampleField(W, w, p)) < 0.01 && insideIntraopView(p)) {
+        headCandidates.push_back(p);
+      }
+    }
+    std::vector<Vec3> taken;
+    const double separation = small ? 10.0 : 8.0;
+    const auto craniotomyPoints = pickSeparated(craniotomyCandidates, 10, separation, taken, rng);
+    const auto cavityPoints = pickSeparated(cavityCandidates, hasCavity ? 6 : 0, 6.0, taken, rng);
+    const auto brainPoints = pickSeparated(brainCandidates, 20, 15.0, taken, rng);
+    const auto headPoints = pickSeparated(headCandidates, 10, 25.0, taken, rng);
+    auto add = [&](const std::vector<Vec3>& points, const std::string& prefix, bool moves) {
+      int number = 1;
+      for (const Vec3& xPrime : points) {
+        LandmarkPair pair;
+        char name[64];
+        std::snprintf(name, sizeof(name), "%s-%02d", prefix.c_str(), number++);
+        pair.name = name;
+        pair.intraop = motion->TransformPoint(toPoint(xPrime));
+        // Brain tissue came from x' + w(x'); the head did not move.
+        pair.preop = moves ? result.intraopToPreop->TransformPoint(pair.intraop) : toPoint(xPrime);
+        result.landmarks.push_back(pair);
+      }
+    };
+    add(craniotomyPoints, "craniotomy", true);
+    add(cavityPoints, "near-cavity", true);
+    add(brainPoints, "brain", true);
+    add(headPoints, "head", false);
+  }
+  return result;
+}
+
+void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs::path& folder)
+{
+  const CaseFiles files(folder);
+  writeScalarVolume(simulated.preopImage, files.preopImage);
+  writeLabelVolume(simulated.preopLabels, files.preopLabels);
+  writeScalarVolume(simulated.preopFmri, files.preopFmri);
+  writeScalarVolume(simulated.intraopImage, files.intraopImage, StoredPixelType::Int16);
+  writeLabelVolume(simulated.intraopLabels, files.truthIntraopLabels);
+  writeTransform(simulated.intraopToPreop, files.truthTransform);
+  writeTransform(simulated.rigidIntraopToPreop, files.truthRigidTransform);
+  writeLandmarksCsv(simulated.landmarks, files.landmarks);
+
+  const CaseFigures& f = simulated.figures;
+  auto point = [](const PhysicalPoint& p) { return nlohmann::json::array({p[0], p[1], p[2]}); };
+  nlohmann::json description = {
+    {"description", "BrainShift built-in case: Colin27 T1 with a simulated brain shift of known truth"},
+    {"truth_model",
+     "kinematic subsidence under the craniotomy (Gaussian lateral profile, exponential decay with depth), "
+     "independent of the finite element solver; defined as the resampling field on the deformed configuration"},
+    {"parameters",
+     {{"size", P.size == CaseSize::Full ? "full" : "small"},
+      {"seed", P.seed},
+      {"shift_mm", P.shiftMillimetres},
+      {"craniotomy", toString(P.craniotomy)},
+      {"resection", P.resection},
+      {"rotation_degrees", P.rotationDegrees},
+      {"translation_mm", P.translationMillimetres},
+      {"noise_fraction", P.noiseFraction},
+      {"bias_strength", P.biasStrength},
+      {"template", (P.templateFolder / "ch2.nii.gz").string()}}},
+    {"figures",
+     {{"craniotomy_centre_lps", point(f.craniotomyCentre)},
+      {"craniotomy_axis_lps", f.craniotomyAxis},
+      {"tumour_centre_lps", point(f.tumourCentre)},
+      {"tumour_volume_ml", f.tumourVolumeMl},
+      {"ventricle_volume_ml", f.ventricleVolumeMl},
+      {"brain_volume_ml", f.brainVolumeMl},
+      {"max_brain_displacement_mm", f.maxBrainDisplacementMm},
+      {"gap_volume_ml", f.gapVolumeMl},
+      {"cavity_volume_ml", f.cavityVolumeMl},
+      {"min_jacobian_determinant", f.minJacobianDeterminant},
+      {"lateral_sigma_mm", f.lateralSigmaMm},
+      {"decay_length_mm", f.decayLengthMm},
+      {"landmarks", simulated.landmarks.size()}}},
+    {"files",
+     {{"preop_image", "preop_image.nii.gz"},
+      {"preop_labels", "preop_labels.nii.gz"},
+      {"overlays", {{"fmri", "preop_fmri.nii.gz"}}},
+      {"intraop_image", "intraop_image.nii.gz"},
+      {"landmarks", "landmarks.csv"},
+      {"truth_intraop_labels", "truth/intraop_labels.nii.gz"},
+      {"truth_intraop_to_preop", "truth/intraop_to_preop.h5"},
+      {"truth_rigid_intraop_to_preop", "truth/rigid_intraop_to_preop.tfm"}}}};
+  writeTextFileAtomically(files.description, description.dump(2) + "\n");
+}
+
+} // namespace brainshift

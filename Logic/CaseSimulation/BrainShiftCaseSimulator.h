@@ -1,0 +1,93 @@
+#pragma once
+// The built-in case: a preoperative T1 with its labels and an fMRI overlay, made from the Colin27
+// template (Debian package mricron-data), and an intraoperative scan of the same head after a
+// brain shift with known truth.
+//
+// The truth deformation is a kinematic subsidence model, independent of the finite element solver
+// that BrainShift uses (a solver cannot be judged against itself): under the craniotomy the brain
+// surface sinks along the craniotomy axis by `shift` * exp(-r^2 / 2 sigma^2) (r: distance from the
+// axis), and the sinking decays exponentially with depth below the sunken surface (length lambda).
+// It is defined as the resampling field w on the deformed configuration (x = x' + w(x')), so the
+// image, the labels and the landmarks all follow from one sampled field, exactly. Brain tissue
+// moves with it; the head outside the brain does not move; where the brain has sunk away from the
+// skull a dark gap opens; the bone flap is removed; the tumour may be resected. Then the head is
+// rigidly moved in the scanner, resampled onto an intraoperative grid with slice thickness, given
+// another contrast, a bias field and Rician noise.
+#include "ImageTypes.h"
+#include "LandmarkIO.h"
+#include "TransformIO.h"
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+enum class CaseSize {
+  Full,  ///< preop 1 mm (181x217x181), intraop 256x256x60 at 0.9375x0.9375x2.5 mm
+  Small  ///< preop 2 mm, intraop 96x96x30 at 2.5x2.5x5 mm: seconds, for tests
+};
+
+enum class CraniotomySite { RightFrontal, LeftFrontal, RightParietal, LeftParietal, Vertex };
+
+struct CaseParameters {
+  CaseSize size = CaseSize::Full;
+  std::uint64_t seed = 2000;
+  double shiftMillimetres = 10.0;  ///< peak sinking of the brain surface under the craniotomy
+  CraniotomySite craniotomy = CraniotomySite::RightFrontal;
+  bool resection = true;           ///< the tumour is removed (a fluid-filled cavity) in the intraop scan
+  std::array<double, 3> rotationDegrees{4.0, -3.0, 6.0};       ///< head in the scanner, about L, P, S
+  std::array<double, 3> translationMillimetres{6.0, -8.0, 5.0};
+  double noiseFraction = 0.03; ///< Rician noise sigma, as a fraction of the white matter intensity
+  double biasStrength = 0.2;   ///< log-amplitude of the multiplicative bias field (0.2: about +-20 %)
+  std::filesystem::path templateFolder = "/usr/share/mricron/templates";
+
+  /// InputError naming the option for values outside what the model means.
+  void validate() const;
+};
+
+std::string toString(CraniotomySite site);
+/// "right-frontal", ... ; InputError listing the choices otherwise.
+CraniotomySite craniotomySiteFromString(const std::string& text);
+
+/// Figures of the simulated case, for case.json and the tests.
+struct CaseFigures {
+  PhysicalPoint craniotomyCentre;   ///< on the preop brain surface, LPS
+  std::array<double, 3> craniotomyAxis{}; ///< outward unit vector, LPS
+  PhysicalPoint tumourCentre;
+  double tumourVolumeMl = 0, ventricleVolumeMl = 0, brainVolumeMl = 0;
+  double maxBrainDisplacementMm = 0;  ///< largest |w| over the deformed brain
+  double gapVolumeMl = 0;             ///< the gap between skull and sunken brain
+  double cavityVolumeMl = 0;
+  double minJacobianDeterminant = 0;  ///< of x' -> x' + w(x') over the brain; > 0: no folding
+  double decayLengthMm = 0, lateralSigmaMm = 0;
+};
+
+struct SimulatedCase {
+  ScalarImage::Pointer preopImage;
+  LabelImage::Pointer preopLabels;   ///< 0 background, 1 head, 2 parenchyma, 3 ventricles, 4 tumour
+  ScalarImage::Pointer preopFmri;    ///< a t-statistic map on its own 3 mm grid
+  ScalarImage::Pointer intraopImage;
+  LabelImage::Pointer intraopLabels; ///< the truth; the gap, the cavity and the bone flap are 0
+  SpatialTransform::Pointer intraopToPreop;      ///< the truth: the subsidence field after the rigid part
+  SpatialTransform::Pointer rigidIntraopToPreop; ///< the rigid part alone
+  std::vector<LandmarkPair> landmarks; ///< "brain-", "craniotomy-", "near-cavity-" and "head-" pairs
+  CaseFigures figures;
+};
+
+/// Builds the case. InputError if the template is missing or the parameters are invalid.
+SimulatedCase simulateCase(const CaseParameters& parameters);
+
+/// Where a case's files are, inside its folder.
+struct CaseFiles {
+  explicit CaseFiles(const std::filesystem::path& folder);
+  std::filesystem::path folder, preopImage, preopLabels, preopFmri, intraopImage, landmarks,
+    truthIntraopLabels, truthTransform, truthRigidTransform, description;
+};
+
+/// Writes every file of CaseFiles (atomically) and case.json with the parameters and figures.
+void writeCase(const SimulatedCase& simulated, const CaseParameters& parameters, const std::filesystem::path& folder);
+
+} // namespace brainshift

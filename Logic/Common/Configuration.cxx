@@ -1,0 +1,121 @@
+#include "Configuration.h"
+
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <set>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+void requireKnownKeys(const json& object, const std::set<std::string>& known, const std::string& where)
+{
+  for (auto it = object.begin(); it != object.end(); ++it) {
+    if (!known.count(it.key())) {
+      std::string list;
+      for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+      throw InputError(where + ": unknown key \"" + it.key() + "\" (known: " + list + ")");
+    }
+  }
+}
+
+double number(const json& value, const std::string& where)
+{
+  if (!value.is_number()) throw InputError(where + ": a number is expected, not " + value.dump());
+  return value.get<double>();
+}
+} // namespace
+
+Configuration Configuration::load(const fs::path& path)
+{
+  Configuration configuration;
+  json document;
+  try {
+    document = json::parse(readTextFile(path));
+  } catch (const json::exception& e) {
+    throw InputError(path.string() + ": not valid JSON: " + e.what());
+  }
+  const std::string file = path.string();
+  if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks"}, file);
+  if (document.contains("materials")) {
+    const json& materials = document["materials"];
+    if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
+    for (auto it = materials.begin(); it != materials.end(); ++it) {
+      const std::string where = file + ": materials." + it.key();
+      int label = -1;
+      try {
+        std::size_t used = 0;
+        label = std::stoi(it.key(), &used);
+        if (used != it.key().size()) label = -1;
+      } catch (const std::exception&) {
+      }
+      if (label < 0 || label > 65535) throw InputError(where + ": the key must be a label number");
+      if (!it.value().is_object()) throw InputError(where + ": an object with youngs_modulus_pa and poisson_ratio is expected");
+      requireKnownKeys(it.value(), {"youngs_modulus_pa", "poisson_ratio"}, where);
+      Material material = configuration.materials.count(label) ? configuration.materials[label] : Material{};
+      if (it.value().contains("youngs_modulus_pa")) material.youngsModulusPa = number(it.value()["youngs_modulus_pa"], where + ".youngs_modulus_pa");
+      if (it.value().contains("poisson_ratio")) material.poissonRatio = number(it.value()["poisson_ratio"], where + ".poisson_ratio");
+      configuration.materials[label] = material;
+    }
+  }
+  if (document.contains("mesh")) {
+    const json& mesh = document["mesh"];
+    if (!mesh.is_object()) throw InputError(file + ": \"mesh\" must be an object");
+    requireKnownKeys(mesh, {"resolution_mm", "labels"}, file + ": mesh");
+    if (mesh.contains("resolution_mm")) configuration.meshResolutionMm = number(mesh["resolution_mm"], file + ": mesh.resolution_mm");
+    if (mesh.contains("labels")) {
+      if (!mesh["labels"].is_array()) throw InputError(file + ": mesh.labels must be a list of labels");
+      configuration.meshLabels.clear();
+      for (const json& l : mesh["labels"]) {
+        if (!l.is_number_integer()) throw InputError(file + ": mesh.labels holds " + l.dump() + ", not a label");
+        configuration.meshLabels.push_back(l.get<int>());
+      }
+    }
+  }
+  if (document.contains("solver")) {
+    const json& solver = document["solver"];
+    if (!solver.is_object()) throw InputError(file + ": \"solver\" must be an object");
+    requireKnownKeys(solver, {"options"}, file + ": solver");
+    if (solver.contains("options")) {
+      if (!solver["options"].is_string()) throw InputError(file + ": solver.options must be a string of PETSc options");
+      configuration.solverOptions = solver["options"].get<std::string>();
+    }
+  }
+  if (document.contains("ranks")) {
+    if (!document["ranks"].is_number_integer()) throw InputError(file + ": ranks must be a whole number");
+    configuration.ranks = document["ranks"].get<int>();
+  }
+  configuration.validate(file);
+  return configuration;
+}
+
+void Configuration::validate(const std::string& source) const
+{
+  for (const auto& [label, material] : materials) {
+    const std::string where = source + ": materials." + std::to_string(label);
+    if (!std::isfinite(material.youngsModulusPa) || material.youngsModulusPa <= 0) {
+      throw InputError(where + ".youngs_modulus_pa: " + std::to_string(material.youngsModulusPa) +
+                       " Pa; a positive, finite modulus is expected");
+    }
+    if (!std::isfinite(material.poissonRatio) || material.poissonRatio < 0 || material.poissonRatio >= 0.5) {
+      throw InputError(where + ".poisson_ratio: " + std::to_string(material.poissonRatio) +
+                       "; it must be at least 0 and below 0.5 (0.5 is incompressible: no linear elastic solution)");
+    }
+  }
+  if (!std::isfinite(meshResolutionMm) || meshResolutionMm < 0.5 || meshResolutionMm > 50) {
+    throw InputError(source + ": mesh resolution " + std::to_string(meshResolutionMm) + " mm is outside 0.5 to 50 mm");
+  }
+  if (meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
+  for (int label : meshLabels) {
+    if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
+  }
+  if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
+}
+
+} // namespace brainshift

@@ -1,0 +1,33 @@
+#pragma once
+// The run configuration (--config, JSON; ../shared/CONTRACT.md). Every key is optional; the
+// defaults are Resources/Configurations/default.json's and the README's. Flags override the file.
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+struct Material {
+  double youngsModulusPa = 3000.0;
+  double poissonRatio = 0.45;
+};
+
+struct Configuration {
+  /// Per label. Defaults: brain parenchyma 3000 Pa / 0.45 (Warfield et al. 2000), ventricles soft
+  /// (100 Pa / 0.3: CSF carries almost no shear), tumour stiffer (10 kPa / 0.45).
+  std::map<int, Material> materials{{2, {3000.0, 0.45}}, {3, {100.0, 0.3}}, {4, {10000.0, 0.45}}};
+  double meshResolutionMm = 3.0;
+  std::vector<int> meshLabels{2, 3, 4};
+  std::string solverOptions; ///< PETSc options over the tuned default
+  int ranks = 1;
+
+  /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
+  /// unknown keys, a Poisson ratio outside [0, 0.5), a non-positive modulus, and the like.
+  static Configuration load(const std::filesystem::path& path);
+
+  /// Checks the values; `source` names where they came from in the error message.
+  void validate(const std::string& source) const;
+};
+
+} // namespace brainshift

@@ -1,0 +1,70 @@
+#include "RunReport.h"
+
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+
+#include <algorithm>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+
+RunReport::RunReport(fs::path file)
+  : file_(std::move(file))
+{
+  std::error_code ec;
+  if (fs::exists(file_, ec)) {
+    try {
+      document_ = nlohmann::json::parse(readTextFile(file_));
+    } catch (const nlohmann::json::exception& e) {
+      throw InputError(file_.string() + ": not a valid report (" + e.what() + ")");
+    }
+    if (!document_.is_object() || (document_.contains("stages") && !document_["stages"].is_object())) {
+      throw InputError(file_.string() + ": not a BrainShift report (no \"stages\" object)");
+    }
+  }
+  if (!document_.is_object()) document_ = nlohmann::json::object();
+  if (!document_.contains("stages")) document_["stages"] = nlohmann::json::object();
+  if (!document_.contains("warnings")) document_["warnings"] = nlohmann::json::array();
+}
+
+void RunReport::setStage(const std::string& stage, const nlohmann::json& figures)
+{
+  if (!figures.is_object() || !figures.contains("wall_seconds")) {
+    throw std::invalid_argument("report entry of stage '" + stage + "' needs an object with wall_seconds");
+  }
+  document_["stages"][stage] = figures;
+}
+
+bool RunReport::hasStage(const std::string& stage) const
+{
+  return document_["stages"].contains(stage);
+}
+
+const nlohmann::json& RunReport::stage(const std::string& stage) const
+{
+  return document_["stages"].at(stage);
+}
+
+void RunReport::set(const std::string& key, const nlohmann::json& value)
+{
+  if (key == "stages" || key == "warnings") throw std::invalid_argument("use setStage/addWarning for " + key);
+  document_[key] = value;
+}
+
+void RunReport::addWarning(const std::string& warning)
+{
+  auto& warnings = document_["warnings"];
+  if (std::find(warnings.begin(), warnings.end(), warning) == warnings.end()) warnings.push_back(warning);
+}
+
+void RunReport::addWarnings(const std::vector<std::string>& warnings)
+{
+  for (const auto& w : warnings) addWarning(w);
+}
+
+void RunReport::save() const
+{
+  writeTextFileAtomically(file_, document_.dump(2) + "\n");
+}
+
+} // namespace brainshift

@@ -1,0 +1,52 @@
+#pragma once
+// report.json (../shared/CONTRACT.md): one object per stage that ran, keyed by its subcommand
+// name, each with "wall_seconds" and its figures, and a top-level "warnings" list. Each stage
+// merges its entry into the file the earlier stages wrote.
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+class RunReport {
+public:
+  /// Loads `file` if it exists (InputError if it is not a report), or starts an empty report.
+  explicit RunReport(std::filesystem::path file);
+
+  /// Sets (replaces) a stage's entry; `figures` must be an object, "wall_seconds" among them.
+  void setStage(const std::string& stage, const nlohmann::json& figures);
+  bool hasStage(const std::string& stage) const;
+  const nlohmann::json& stage(const std::string& stage) const;
+
+  /// Sets a top-level entry other than the stages (e.g. "case", "brainshift_version").
+  void set(const std::string& key, const nlohmann::json& value);
+
+  void addWarning(const std::string& warning);
+  void addWarnings(const std::vector<std::string>& warnings);
+  const nlohmann::json& document() const { return document_; }
+
+  /// Writes the report atomically.
+  void save() const;
+
+private:
+  std::filesystem::path file_;
+  nlohmann::json document_;
+};
+
+/// Wall time since construction, in seconds.
+class Stopwatch {
+public:
+  Stopwatch() : start_(std::chrono::steady_clock::now()) {}
+  double seconds() const
+  {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+} // namespace brainshift

@@ -1,0 +1,54 @@
+// The configuration file: defaults, overrides per key, and errors that name the file and the key.
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+#include "BrainShiftTestingSupport.h"
+#include "Configuration.h"
+
+int ConfigurationTest(int, char*[])
+{
+  return brainshift::testing::runTest("ConfigurationTest", [] {
+    using namespace brainshift;
+    namespace fs = std::filesystem;
+    const fs::path folder = testing::temporaryFolder("ConfigurationTest");
+    const Configuration defaults;
+    BS_CHECK_NEAR(defaults.materials.at(2).youngsModulusPa, 3000.0, 0);
+    BS_CHECK_NEAR(defaults.materials.at(2).poissonRatio, 0.45, 0);
+    BS_CHECK_NEAR(defaults.meshResolutionMm, 3.0, 0);
+
+    // The default configuration shipped in Resources/ is the built-in one, and valid.
+    const Configuration shipped = Configuration::load(BRAINSHIFT_DEFAULT_CONFIGURATION);
+    for (const auto& [label, material] : defaults.materials) {
+      BS_CHECK_NEAR(shipped.materials.at(label).youngsModulusPa, material.youngsModulusPa, 0);
+      BS_CHECK_NEAR(shipped.materials.at(label).poissonRatio, material.poissonRatio, 0);
+    }
+    BS_CHECK(shipped.meshLabels == defaults.meshLabels);
+    BS_CHECK_NEAR(shipped.meshResolutionMm, defaults.meshResolutionMm, 0);
+
+    const fs::path file = folder / "config.json";
+    writeTextFileAtomically(file, R"({"materials": {"4": {"youngs_modulus_pa": 20000}},
+                                      "mesh": {"resolution_mm": 2.5, "labels": [2, 3]},
+                                      "solver": {"options": "-ksp_type gmres -pc_type bjacobi"}})");
+    const Configuration c = Configuration::load(file);
+    BS_CHECK_NEAR(c.materials.at(4).youngsModulusPa, 20000.0, 0);
+    BS_CHECK_NEAR(c.materials.at(4).poissonRatio, 0.45, 0); // the rest of label 4 keeps its default
+    BS_CHECK_NEAR(c.materials.at(2).youngsModulusPa, 3000.0, 0);
+    BS_CHECK_NEAR(c.meshResolutionMm, 2.5, 0);
+    BS_CHECK((c.meshLabels == std::vector<int>{2, 3}));
+    BS_CHECK(c.solverOptions == "-ksp_type gmres -pc_type bjacobi");
+
+    auto refused = [&](const std::string& text, const std::string& fragment) {
+      writeTextFileAtomically(file, text);
+      BS_CHECK_THROWS(Configuration::load(file), InputError, fragment);
+      BS_CHECK_THROWS(Configuration::load(file), InputError, file.string());
+    };
+    refused(R"({"materials": {"2": {"poisson_ratio": 0.5}}})", "materials.2.poisson_ratio");
+    refused(R"({"materials": {"3": {"youngs_modulus_pa": -1}}})", "materials.3.youngs_modulus_pa");
+    refused(R"({"materials": {"brain": {"youngs_modulus_pa": 1}}})", "label number");
+    refused(R"({"materials": {"2": {"youngs_modulus_pa": "soft"}}})", "a number is expected");
+    refused(R"({"mesh": {"resolution_mm": 0.01}})", "mesh resolution");
+    refused(R"({"mesh": {"labels": []}})", "empty");
+    refused(R"({"meshes": {}})", "unknown key \"meshes\"");
+    refused(R"({"materials": )", "not valid JSON");
+    BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
+  });
+}

@@ -1,0 +1,39 @@
+// report.json: stages merge into the file earlier stages wrote, warnings are kept once, a file
+// that is not a report is refused rather than overwritten.
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+#include "BrainShiftTestingSupport.h"
+#include "RunReport.h"
+
+int RunReportTest(int, char*[])
+{
+  return brainshift::testing::runTest("RunReportTest", [] {
+    using namespace brainshift;
+    namespace fs = std::filesystem;
+    const fs::path folder = testing::temporaryFolder("RunReportTest");
+    const fs::path file = folder / "report.json";
+    {
+      RunReport report(file);
+      report.setStage("rigid", {{"wall_seconds", 1.5}, {"metric_value", -0.61}, {"iterations", 40}});
+      report.addWarning("a warning");
+      report.addWarning("a warning");
+      report.save();
+    }
+    {
+      RunReport report(file);
+      BS_CHECK(report.hasStage("rigid"));
+      report.setStage("mesh", {{"wall_seconds", 0.7}, {"nodes", 25800}});
+      report.save();
+    }
+    const nlohmann::json json = nlohmann::json::parse(readTextFile(file));
+    BS_CHECK_NEAR(json["stages"]["rigid"]["metric_value"].get<double>(), -0.61, 1e-12);
+    BS_CHECK(json["stages"]["mesh"]["nodes"] == 25800);
+    BS_CHECK(json["warnings"].size() == 1);
+    BS_CHECK_THROWS(RunReport(file).setStage("warp", {{"voxels", 3}}), std::invalid_argument, "wall_seconds");
+
+    writeTextFileAtomically(folder / "broken.json", "{ not json");
+    BS_CHECK_THROWS(RunReport(folder / "broken.json"), InputError, "broken.json");
+    writeTextFileAtomically(folder / "list.json", "[1, 2]");
+    BS_CHECK_THROWS(RunReport(folder / "list.json"), InputError, "not a BrainShift report");
+  });
+}

@@ -1,0 +1,23 @@
+#pragma once
+// 3D Slicer markups files (.mrk.json, schema v1.0): a fiducial list of named control points, LPS.
+#include "BrainShiftErrors.h"
+#include "ImageTypes.h"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+struct NamedPoint {
+  std::string name;
+  PhysicalPoint position;
+};
+
+/// Reads the control points of the first markup. Positions in a file that says RAS are converted.
+std::vector<NamedPoint> readMarkupsJson(const std::filesystem::path& path);
+
+/// Writes one fiducial markup in LPS, atomically.
+void writeMarkupsJson(const std::vector<NamedPoint>& points, const std::filesystem::path& path);
+
+} // namespace brainshift

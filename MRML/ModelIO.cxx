@@ -1,0 +1,175 @@
+#include "ModelIO.h"
+
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+
+#include <vtkDataSetReader.h>
+#include <vtkFieldData.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+#include <vtkPolyData.h>
+#include <vtkPolyDataWriter.h>
+#include <vtkStringArray.h>
+#include <vtkUnstructuredGrid.h>
+#include <vtkUnstructuredGridWriter.h>
+#include <vtkXMLPolyDataReader.h>
+#include <vtkXMLPolyDataWriter.h>
+#include <vtkXMLUnstructuredGridReader.h>
+#include <vtkXMLUnstructuredGridWriter.h>
+
+#include <algorithm>
+#include <fstream>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+
+namespace {
+// 3D Slicer 5 records a model's coordinate system in .vtp/.vtu files as a one-value string array
+// "SPACE" in the field data ("LPS" or "RAS"), and in legacy .vtk files as "SPACE=LPS" in the
+// header line. Without a tag Slicer assumes RAS, so BrainShift always writes one.
+constexpr const char* SpaceArrayName = "SPACE";
+
+std::string extensionOf(const fs::path& path)
+{
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return ext;
+}
+
+std::string spaceTagOf(vtkPointSet* model)
+{
+  auto* tag = vtkStringArray::SafeDownCast(model->GetFieldData()->GetAbstractArray(SpaceArrayName));
+  return tag && tag->GetNumberOfValues() == 1 ? tag->GetValue(0) : std::string();
+}
+
+std::string legacyHeaderSpace(const fs::path& path)
+{
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line); // "# vtk DataFile Version x.y"
+  std::getline(in, line); // the header line
+  if (line.find("SPACE=RAS") != std::string::npos) return "RAS";
+  if (line.find("SPACE=LPS") != std::string::npos) return "LPS";
+  return "";
+}
+
+void flipXY(vtkPointSet* model)
+{
+  vtkPoints* points = model->GetPoints();
+  for (vtkIdType i = 0; i < points->GetNumberOfPoints(); ++i) {
+    double p[3];
+    points->GetPoint(i, p);
+    p[0] = -p[0];
+    p[1] = -p[1];
+    points->SetPoint(i, p);
+  }
+  points->Modified();
+}
+} // namespace
+
+vtkSmartPointer<vtkPointSet> readModel(const fs::path& path)
+{
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) {
+    throw InputError(path.string() + ": no such file");
+  }
+  const std::string ext = extensionOf(path);
+  vtkSmartPointer<vtkPointSet> model;
+  std::string space;
+  if (ext == ".vtp" || ext == ".vtu") {
+    vtkSmartPointer<vtkXMLReader> reader;
+    if (ext == ".vtp") reader = vtkSmartPointer<vtkXMLPolyDataReader>::New();
+    else reader = vtkSmartPointer<vtkXMLUnstructuredGridReader>::New();
+    if (!reader->CanReadFile(path.c_str())) {
+      throw InputError(path.string() + ": not a VTK XML " + (ext == ".vtp" ? "polydata" : "unstructured grid") + " file");
+    }
+    reader->SetFileName(path.c_str());
+    reader->Update();
+    if (reader->GetErrorCode() != 0) {
+      throw InputError(path.string() + ": cannot read the model (truncated or corrupt?)");
+    }
+    model = vtkPointSet::SafeDownCast(reader->GetOutputDataObject(0));
+    if (model) space = spaceTagOf(model);
+  } else if (ext == ".vtk") {
+    auto reader = vtkSmartPointer<vtkDataSetReader>::New();
+    reader->SetFileName(path.c_str());
+    reader->Update();
+    model = vtkPointSet::SafeDownCast(reader->GetOutput());
+    space = legacyHeaderSpace(path);
+  } else {
+    throw InputError(path.string() + ": not a model file (expected .vtp, .vtu or .vtk)");
+  }
+  if (!model || !model->GetPoints() || model->GetNumberOfPoints() == 0) {
+    throw InputError(path.string() + ": the model has no points (not a valid model file?)");
+  }
+  // Detach from the reader, drop the tag (it describes the file, not the data), convert to LPS.
+  vtkSmartPointer<vtkPointSet> copy;
+  copy.TakeReference(model->NewInstance());
+  copy->DeepCopy(model);
+  copy->GetFieldData()->RemoveArray(SpaceArrayName);
+  if (space == "RAS") flipXY(copy);
+  return copy;
+}
+
+void writeModel(vtkPointSet* model, const fs::path& path)
+{
+  if (!model) throw std::invalid_argument("writeModel: no model for " + path.string());
+  const std::string ext = extensionOf(path);
+  const bool isPolyData = vtkPolyData::SafeDownCast(model) != nullptr;
+  const bool isGrid = vtkUnstructuredGrid::SafeDownCast(model) != nullptr;
+  if ((ext == ".vtp" && !isPolyData) || (ext == ".vtu" && !isGrid) || (ext == ".vtk" && !isPolyData && !isGrid) ||
+      (ext != ".vtp" && ext != ".vtu" && ext != ".vtk")) {
+    throw std::invalid_argument("cannot write a " + std::string(model->GetClassName()) + " to " + path.string() +
+                                " (surfaces to .vtp, tetrahedral meshes to .vtu)");
+  }
+  vtkSmartPointer<vtkPointSet> tagged;
+  tagged.TakeReference(model->NewInstance());
+  tagged->ShallowCopy(model);
+  auto fieldData = vtkSmartPointer<vtkFieldData>::New();
+  fieldData->DeepCopy(model->GetFieldData());
+  tagged->SetFieldData(fieldData);
+
+  AtomicFile file(path);
+  int written = 0;
+  if (ext == ".vtk") {
+    vtkSmartPointer<vtkDataWriter> writer;
+    if (isPolyData) {
+      auto w = vtkSmartPointer<vtkPolyDataWriter>::New();
+      w->SetInputData(tagged);
+      writer = w;
+    } else {
+      auto w = vtkSmartPointer<vtkUnstructuredGridWriter>::New();
+      w->SetInputData(tagged);
+      writer = w;
+    }
+    writer->SetHeader("BrainShift output. SPACE=LPS");
+    writer->SetFileName(file.temporaryPath().c_str());
+    writer->SetFileTypeToBinary();
+    written = writer->Write();
+  } else {
+    auto tag = vtkSmartPointer<vtkStringArray>::New();
+    tag->SetName(SpaceArrayName);
+    tag->InsertNextValue("LPS");
+    fieldData->AddArray(tag);
+    vtkSmartPointer<vtkXMLWriter> writer;
+    if (isPolyData) {
+      auto w = vtkSmartPointer<vtkXMLPolyDataWriter>::New();
+      w->SetInputData(tagged);
+      writer = w;
+    } else {
+      auto w = vtkSmartPointer<vtkXMLUnstructuredGridWriter>::New();
+      w->SetInputData(tagged);
+      writer = w;
+    }
+    writer->SetFileName(file.temporaryPath().c_str());
+    writer->SetDataModeToBinary();
+    writer->SetCompressorTypeToZLib();
+    written = writer->Write();
+  }
+  if (!written) {
+    throw std::runtime_error("cannot write " + path.string());
+  }
+  file.commit();
+}
+
+} // namespace brainshift

@@ -1,0 +1,694 @@
+#include "SceneIO.h"
+
+#include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+#include "MarkupsIO.h"
+#include "ModelIO.h"
+#include "VolumeIO.h"
+
+#include <vtkCellData.h>
+#include <vtkNew.h>
+#include <vtkPointData.h>
+#include <vtkXMLDataElement.h>
+#include <vtkXMLDataParser.h>
+
+#include <cmath>
+#include <iomanip>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* RoleAttribute = "BrainShift.Role";
+constexpr const char* PairsAttribute = "BrainShift.LandmarkPairs"; // the LandmarksNode a point list belongs to
+constexpr const char* SideAttribute = "BrainShift.LandmarkSide";   // "preop" or "intraop"
+
+// ---- XML writing ------------------------------------------------------------------------
+std::string xmlEscape(const std::string& text)
+{
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+    case '&': out += "&amp;"; break;
+    case '"': out += "&quot;"; break;
+    case '\'': out += "&apos;"; break;
+    case '<': out += "&lt;"; break;
+    case '>': out += "&gt;"; break;
+    default: out += c;
+    }
+  }
+  return out;
+}
+
+/// Slicer URL-decodes file names: a literal '%' must be written "%25".
+std::string encodeFileName(const std::string& name)
+{
+  std::string out;
+  for (char c : name) out += (c == '%') ? std::string("%25") : std::string(1, c);
+  return out;
+}
+
+std::string decodeFileName(const std::string& name)
+{
+  static const std::map<std::string, char> codes = {{"%20", ' '}, {"%22", '"'}, {"%25", '%'},
+                                                    {"%27", '\''}, {"%3C", '<'}, {"%3E", '>'}};
+  std::string out;
+  for (std::size_t i = 0; i < name.size(); ++i) {
+    if (name[i] == '%' && i + 2 < name.size()) {
+      auto code = codes.find(name.substr(i, 3));
+      if (code != codes.end()) {
+        out += code->second;
+        i += 2;
+        continue;
+      }
+    }
+    out += name[i];
+  }
+  return out;
+}
+
+/// Slicer's "attributes": "key:value;key:value", with '%' and ';' escaped in values.
+std::string encodeAttributes(const std::map<std::string, std::string>& attributes)
+{
+  std::string out;
+  for (const auto& [key, value] : attributes) {
+    std::string escaped;
+    for (char c : value) {
+      if (c == '%') escaped += "%25";
+      else if (c == ';') escaped += "%3B";
+      else escaped += c;
+    }
+    out += key + ":" + escaped + ";";
+  }
+  return out;
+}
+
+std::map<std::string, std::string> decodeAttributes(const std::string& text)
+{
+  std::map<std::string, std::string> attributes;
+  std::istringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ';')) {
+    const auto colon = item.find(':');
+    if (colon == std::string::npos) continue;
+    std::string value = item.substr(colon + 1);
+    std::string decoded;
+    for (std::size_t i = 0; i < value.size(); ++i) {
+      if (value.compare(i, 3, "%3B") == 0) { decoded += ';'; i += 2; }
+      else if (value.compare(i, 3, "%25") == 0) { decoded += '%'; i += 2; }
+      else decoded += value[i];
+    }
+    attributes[item.substr(0, colon)] = decoded;
+  }
+  return attributes;
+}
+
+std::string formatNumber(double value)
+{
+  std::ostringstream s;
+  s << std::setprecision(std::numeric_limits<double>::max_digits10) << value;
+  return s.str();
+}
+
+class Element {
+public:
+  explicit Element(std::string tag) : tag_(std::move(tag)) {}
+  Element& set(const std::string& name, const std::string& value)
+  {
+    attributes_.emplace_back(name, value);
+    return *this;
+  }
+  Element& set(const std::string& name, double value) { return set(name, formatNumber(value)); }
+  Element& set(const std::string& name, bool value) { return set(name, std::string(value ? "true" : "false")); }
+  Element& set(const std::string& name, const char* value) { return set(name, std::string(value)); }
+  std::string str() const
+  {
+    std::string out = " <" + tag_;
+    for (const auto& [name, value] : attributes_) out += "\n  " + name + "=\"" + xmlEscape(value) + "\"";
+    return out + " ></" + tag_ + ">\n";
+  }
+
+private:
+  std::string tag_;
+  std::vector<std::pair<std::string, std::string>> attributes_;
+};
+
+std::string sanitizedFileStem(const std::string& name)
+{
+  std::string stem;
+  for (unsigned char c : name) stem += (std::isalnum(c) || c == '-' || c == '_' || c == '.') ? static_cast<char>(c) : '_';
+  return stem.empty() ? std::string("node") : stem;
+}
+
+std::string vectorString(const std::array<double, 3>& v)
+{
+  return formatNumber(v[0]) + " " + formatNumber(v[1]) + " " + formatNumber(v[2]);
+}
+
+/// 16 row-major numbers: the RAS matrix that takes child coordinates to the parent, for a node
+/// whose transform from parent (LPS) is `fromParent`.
+std::string matrixTransformToParent(const SpatialTransform* fromParent)
+{
+  const AffineParameters p = affineParametersOf(fromParent);
+  // RAS form of the LPS transform: D T D with D = diag(-1, -1, 1).
+  const double d[3] = {-1, -1, 1};
+  double m[3][3], t[3];
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m[r][c] = d[r] * p.matrix[r][c] * d[c];
+    t[r] = d[r] * p.translation[r];
+  }
+  // Inverse of [m t; 0 1]: [m^-1, -m^-1 t].
+  const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                     m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  if (std::abs(det) < 1e-12) throw std::invalid_argument("a linear transform with a singular matrix");
+  double inv[3][3];
+  inv[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
+  inv[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
+  inv[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
+  inv[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
+  inv[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
+  inv[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
+  inv[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
+  inv[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
+  inv[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
+  std::string out;
+  for (int r = 0; r < 3; ++r) {
+    double translation = 0;
+    for (int c = 0; c < 3; ++c) {
+      out += formatNumber(inv[r][c]) + " ";
+      translation -= inv[r][c] * t[c];
+    }
+    out += formatNumber(translation) + " ";
+  }
+  return out + "0 0 0 1";
+}
+
+struct WriteContext {
+  fs::path sceneFolder;
+  fs::path dataFolder;
+  std::set<std::string> usedStems;
+  int storageCounter = 0;
+  int displayCounter = 0;
+
+  fs::path newDataFile(const std::string& name, const std::string& extension)
+  {
+    std::string stem = sanitizedFileStem(name);
+    std::string candidate = stem;
+    for (int i = 1; usedStems.count(candidate + extension); ++i) candidate = stem + "_" + std::to_string(i);
+    usedStems.insert(candidate + extension);
+    return dataFolder / (candidate + extension);
+  }
+
+  std::string relative(const fs::path& file) const
+  {
+    return encodeFileName(
+      fs::absolute(file).lexically_normal().lexically_relative(fs::absolute(sceneFolder).lexically_normal()).generic_string());
+  }
+};
+
+std::string dataExtension(const Node& node)
+{
+  switch (node.kind()) {
+  case NodeKind::ScalarVolume:
+  case NodeKind::LabelMapVolume: return ".nii.gz";
+  case NodeKind::Model: return static_cast<const ModelNode&>(node).isVolumetric() ? ".vtu" : ".vtp";
+  case NodeKind::Transform:
+    switch (static_cast<const TransformNode&>(node).type()) {
+    case TransformNode::Type::Linear: return ".tfm";
+    case TransformNode::Type::DisplacementField: return ".nrrd";
+    case TransformNode::Type::Composite: return ".h5";
+    }
+    break;
+  case NodeKind::Landmarks: return ".mrk.json";
+  }
+  return "";
+}
+
+void writeNodeData(Node& node, const fs::path& file)
+{
+  switch (node.kind()) {
+  case NodeKind::ScalarVolume: writeScalarVolume(static_cast<ScalarVolumeNode&>(node).image(), file); break;
+  case NodeKind::LabelMapVolume: writeLabelVolume(static_cast<LabelMapVolumeNode&>(node).image(), file); break;
+  case NodeKind::Model: writeModel(static_cast<ModelNode&>(node).mesh(), file); break;
+  case NodeKind::Transform: writeTransform(static_cast<TransformNode&>(node).transformFromParent(), file); break;
+  case NodeKind::Landmarks: break; // written as two point lists by the caller
+  }
+}
+
+bool hasData(const Node& node)
+{
+  switch (node.kind()) {
+  case NodeKind::ScalarVolume: return static_cast<const ScalarVolumeNode&>(node).image() != nullptr;
+  case NodeKind::LabelMapVolume: return static_cast<const LabelMapVolumeNode&>(node).image() != nullptr;
+  case NodeKind::Model: return static_cast<const ModelNode&>(node).mesh() != nullptr;
+  case NodeKind::Transform: return static_cast<const TransformNode&>(node).transformFromParent() != nullptr;
+  case NodeKind::Landmarks: return true;
+  }
+  return false;
+}
+
+std::string referencesOf(const std::string& displayId, const std::string& storageId, const std::string& transformId)
+{
+  std::string refs;
+  if (!displayId.empty()) refs += "display:" + displayId + ";";
+  if (!storageId.empty()) refs += "storage:" + storageId + ";";
+  if (!transformId.empty()) refs += "transform:" + transformId + ";";
+  return refs;
+}
+
+Element commonElement(const char* tag, const std::string& id, const std::string& name,
+                      const std::map<std::string, std::string>& attributes, const std::string& references)
+{
+  Element e(tag);
+  e.set("id", id).set("name", name).set("hideFromEditors", false).set("selectable", true).set("selected", false);
+  if (!attributes.empty()) e.set("attributes", encodeAttributes(attributes));
+  e.set("references", references);
+  return e;
+}
+
+std::map<std::string, std::string> attributesWithRole(const Node& node)
+{
+  auto attributes = node.attributes();
+  if (!node.role().empty()) attributes[RoleAttribute] = node.role();
+  return attributes;
+}
+
+void writeVolumeDisplay(std::string& xml, const std::string& tag, const std::string& id, const VolumeDisplay& display)
+{
+  Element e(tag);
+  e.set("id", id).set("name", tag).set("hideFromEditors", true).set("visibility", true).set("opacity", display.opacity);
+  e.set("colorNodeID", slicerColorNodeId(display.colorTable));
+  if (tag == "VolumeDisplay") {
+    const bool manual = display.window && display.level;
+    e.set("autoWindowLevel", manual ? "0" : "1").set("interpolate", "1");
+    if (manual) e.set("window", *display.window).set("level", *display.level);
+    const bool threshold = display.lowerThreshold || display.upperThreshold;
+    e.set("applyThreshold", threshold ? "1" : "0").set("autoThreshold", "0");
+    if (display.lowerThreshold) e.set("lowerThreshold", *display.lowerThreshold);
+    if (display.upperThreshold) e.set("upperThreshold", *display.upperThreshold);
+  }
+  xml += e.str();
+}
+
+std::string storageElement(const char* tag, const std::string& id, const std::string& fileName, bool coordinateSystem)
+{
+  Element e(tag);
+  e.set("id", id).set("name", tag).set("hideFromEditors", true).set("fileName", fileName).set("useCompression", "1");
+  if (coordinateSystem) e.set("coordinateSystem", "LPS");
+  return e.str();
+}
+
+} // namespace
+
+std::string slicerColorNodeId(const std::string& colorTable)
+{
+  if (colorTable.rfind("vtkMRML", 0) == 0) return colorTable;
+  static const std::map<std::string, std::string> ids = {
+    {"Grey", "vtkMRMLColorTableNodeGrey"},
+    {"Labels", "vtkMRMLColorTableNodeLabels"},
+    {"GenericAnatomyColors", "vtkMRMLColorTableNodeFileGenericAnatomyColors.txt"},
+    {"Rainbow", "vtkMRMLColorTableNodeRainbow"},
+    {"ColdToHotRainbow", "vtkMRMLColorTableNodeFileColdToHotRainbow.txt"},
+    {"Viridis", "vtkMRMLColorTableNodeFileViridis.txt"},
+    {"Red", "vtkMRMLColorTableNodeRed"},
+    {"RedGreenBlue", "vtkMRMLProceduralColorNodeRedGreenBlue"}};
+  auto it = ids.find(colorTable);
+  return it != ids.end() ? it->second : "vtkMRMLColorTableNodeGrey";
+}
+
+std::string colorTableFromSlicerId(const std::string& colorNodeId)
+{
+  for (const char* name : {"Grey", "Labels", "GenericAnatomyColors", "Rainbow", "ColdToHotRainbow", "Viridis", "Red", "RedGreenBlue"}) {
+    if (slicerColorNodeId(name) == colorNodeId) return name;
+  }
+  return colorNodeId;
+}
+
+void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions& options)
+{
+  WriteContext context;
+  context.sceneFolder = mrmlPath.has_parent_path() ? mrmlPath.parent_path() : fs::path(".");
+  context.dataFolder = context.sceneFolder / options.dataFolder;
+  fs::create_directories(context.dataFolder);
+  for (const auto& node : scene.nodes()) {
+    if (!node->storageFile().empty()) context.usedStems.insert(node->storageFile().filename().string());
+  }
+
+  std::string xml = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<MRML  version=\"Slicer 5.2.2 31382\"  userTags=\"\">\n";
+  for (const auto& nodePointer : scene.nodes()) {
+    Node& node = *nodePointer;
+    if (!hasData(node)) continue;
+    const std::string transformId =
+      !node.parentTransformId().empty() && scene.node(node.parentTransformId()) ? node.parentTransformId() : "";
+
+    if (node.kind() == NodeKind::Landmarks) {
+      auto& landmarks = static_cast<LandmarksNode&>(node);
+      for (const char* side : {"preop", "intraop"}) {
+        const bool preop = std::string(side) == "preop";
+        std::vector<NamedPoint> points;
+        for (const LandmarkPair& pair : landmarks.pairs()) points.push_back({pair.name, preop ? pair.preop : pair.intraop});
+        const fs::path file = context.newDataFile(node.name() + "_" + side, ".mrk.json");
+        writeMarkupsJson(points, file);
+        const std::string suffix = std::string(side) == "preop" ? "_preop" : "_intraop";
+        const std::string listId = node.id() + suffix;
+        const std::string displayId = "vtkMRMLMarkupsDisplayNode" + std::to_string(++context.displayCounter);
+        const std::string storageId = "vtkMRMLMarkupsJsonStorageNode" + std::to_string(++context.storageCounter);
+        auto attributes = attributesWithRole(node);
+        attributes[PairsAttribute] = node.name();
+        attributes[SideAttribute] = side;
+        // Preoperative points live in the preoperative frame, under the node's transform.
+        Element list = commonElement("MarkupsFiducial", listId, node.name() + " " + side, attributes,
+                                     referencesOf(displayId, storageId, preop ? transformId : ""));
+        list.set("locked", true).set("controlPointLabelFormat", "%N-%d");
+        xml += list.str();
+        Element display("MarkupsDisplay");
+        display.set("id", displayId).set("name", "MarkupsDisplay").set("hideFromEditors", true).set("visibility", true);
+        display.set("color", preop ? "0.4 1 1" : "1 1 0.4").set("selectedColor", preop ? "0.2 0.8 1" : "1 0.8 0.2");
+        xml += display.str();
+        xml += storageElement("MarkupsJsonStorage", storageId, context.relative(file), true);
+      }
+      node.markStored();
+      continue;
+    }
+
+    std::error_code ec;
+    if (node.storageFile().empty() || node.dataModifiedSinceStorage() || !fs::exists(node.storageFile(), ec)) {
+      const fs::path file = context.newDataFile(node.name(), dataExtension(node));
+      writeNodeData(node, file);
+      node.setStorageFile(fs::absolute(file));
+    }
+    node.markStored();
+    const std::string fileName = context.relative(node.storageFile());
+    const std::string storageId = node.id() + "Storage";
+    const std::string displayId = node.id() + "Display";
+
+    switch (node.kind()) {
+    case NodeKind::ScalarVolume: {
+      const auto& volume = static_cast<ScalarVolumeNode&>(node);
+      xml += commonElement("Volume", node.id(), node.name(), attributesWithRole(node),
+                           referencesOf(displayId, storageId, transformId)).str();
+      writeVolumeDisplay(xml, "VolumeDisplay", displayId, volume.display());
+      xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
+      break;
+    }
+    case NodeKind::LabelMapVolume: {
+      const auto& labels = static_cast<LabelMapVolumeNode&>(node);
+      xml += commonElement("LabelMapVolume", node.id(), node.name(), attributesWithRole(node),
+                           referencesOf(displayId, storageId, transformId)).str();
+      writeVolumeDisplay(xml, "LabelMapVolumeDisplay", displayId, labels.display());
+      xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
+      break;
+    }
+    case NodeKind::Model: {
+      const auto& model = static_cast<ModelNode&>(node);
+      const ModelDisplay& d = model.display();
+      xml += commonElement("Model", node.id(), node.name(), attributesWithRole(node),
+                           referencesOf(displayId, storageId, transformId)).str();
+      Element display("ModelDisplay");
+      display.set("id", displayId).set("name", "ModelDisplay").set("hideFromEditors", true);
+      display.set("color", vectorString(d.color)).set("opacity", d.opacity).set("visibility", true);
+      display.set("visibility2D", true).set("visibility3D", true).set("scalarVisibility", d.scalarVisibility);
+      if (!d.activeScalarName.empty()) {
+        const bool onCells = model.mesh() && !model.mesh()->GetPointData()->HasArray(d.activeScalarName.c_str()) &&
+                             model.mesh()->GetCellData()->HasArray(d.activeScalarName.c_str());
+        display.set("activeScalarName", d.activeScalarName).set("activeAttributeLocation", onCells ? "cell" : "point");
+      }
+      display.set("colorNodeID", slicerColorNodeId(d.colorTable));
+      if (d.scalarRange) {
+        display.set("scalarRangeFlag", "UseManual")
+          .set("scalarRange", formatNumber((*d.scalarRange)[0]) + " " + formatNumber((*d.scalarRange)[1]));
+      } else {
+        display.set("scalarRangeFlag", "UseData");
+      }
+      xml += display.str();
+      xml += storageElement("ModelStorage", storageId, fileName, true);
+      break;
+    }
+    case NodeKind::Transform: {
+      const auto& transform = static_cast<TransformNode&>(node);
+      const char* tag = transform.type() == TransformNode::Type::Linear ? "LinearTransform"
+                        : transform.type() == TransformNode::Type::DisplacementField ? "GridTransform"
+                                                                                     : "Transform";
+      Element e = commonElement(tag, node.id(), node.name(), attributesWithRole(node), referencesOf("", storageId, transformId));
+      if (transform.type() == TransformNode::Type::Linear) {
+        e.set("matrixTransformToParent", matrixTransformToParent(transform.transformFromParent()));
+      }
+      xml += e.str();
+      Element storage("TransformStorage");
+      storage.set("id", storageId).set("name", "TransformStorage").set("hideFromEditors", true);
+      storage.set("fileName", fileName).set("useCompression", "1").set("preferITKv3CompatibleTransforms", false);
+      xml += storage.str();
+      break;
+    }
+    case NodeKind::Landmarks: break;
+    }
+  }
+  xml += "</MRML>\n";
+  writeTextFileAtomically(mrmlPath, xml);
+}
+
+// ---- Reading ------------------------------------------------------------------------------
+namespace {
+
+struct ParsedElement {
+  std::string tag;
+  std::map<std::string, std::string> attributes;
+  std::string get(const std::string& name, const std::string& fallback = "") const
+  {
+    auto it = attributes.find(name);
+    return it != attributes.end() ? it->second : fallback;
+  }
+  /// The ids of a reference role ("display", "storage", "transform"), from `references` or
+  /// the legacy `<role>NodeRef`.
+  std::vector<std::string> references(const std::string& role) const
+  {
+    std::vector<std::string> ids;
+    std::istringstream in(get("references"));
+    std::string item;
+    bool found = false;
+    while (std::getline(in, item, ';')) {
+      const auto colon = item.find(':');
+      if (colon == std::string::npos || item.substr(0, colon) != role) continue;
+      found = true;
+      std::istringstream list(item.substr(colon + 1));
+      std::string id;
+      while (list >> id) ids.push_back(id);
+    }
+    if (!found) {
+      std::istringstream legacy(get(role + "NodeRef"));
+      std::string id;
+      while (legacy >> id) ids.push_back(id);
+    }
+    return ids;
+  }
+};
+
+std::optional<double> optionalNumber(const ParsedElement& e, const std::string& name)
+{
+  const std::string text = e.get(name);
+  if (text.empty()) return std::nullopt;
+  try {
+    return std::stod(text);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+VolumeDisplay readVolumeDisplay(const ParsedElement* e, VolumeDisplay display)
+{
+  if (!e) return display;
+  if (!e->get("colorNodeID").empty()) display.colorTable = colorTableFromSlicerId(e->get("colorNodeID"));
+  if (auto opacity = optionalNumber(*e, "opacity")) display.opacity = *opacity;
+  if (e->get("autoWindowLevel", "1") == "0") {
+    display.window = optionalNumber(*e, "window");
+    display.level = optionalNumber(*e, "level");
+  }
+  if (e->get("applyThreshold", "0") == "1") {
+    display.lowerThreshold = optionalNumber(*e, "lowerThreshold");
+    display.upperThreshold = optionalNumber(*e, "upperThreshold");
+  }
+  return display;
+}
+
+ModelDisplay readModelDisplay(const ParsedElement* e)
+{
+  ModelDisplay display;
+  if (!e) return display;
+  std::istringstream color(e->get("color"));
+  std::array<double, 3> c{};
+  if (color >> c[0] >> c[1] >> c[2]) display.color = c;
+  if (auto opacity = optionalNumber(*e, "opacity")) display.opacity = *opacity;
+  display.scalarVisibility = e->get("scalarVisibility") == "true";
+  display.activeScalarName = e->get("activeScalarName");
+  if (!e->get("colorNodeID").empty()) display.colorTable = colorTableFromSlicerId(e->get("colorNodeID"));
+  if (e->get("scalarRangeFlag") == "UseManual") {
+    std::istringstream range(e->get("scalarRange"));
+    std::array<double, 2> r{};
+    if (range >> r[0] >> r[1]) display.scalarRange = r;
+  }
+  return display;
+}
+
+} // namespace
+
+void readScene(Scene& scene, const fs::path& mrmlPath)
+{
+  std::error_code ec;
+  if (!fs::is_regular_file(mrmlPath, ec)) {
+    throw InputError(mrmlPath.string() + ": no such scene file");
+  }
+  vtkNew<vtkXMLDataParser> parser;
+  parser->SetFileName(mrmlPath.c_str());
+  parser->SetIgnoreCharacterData(1);
+  if (!parser->Parse() || !parser->GetRootElement() || std::string(parser->GetRootElement()->GetName()) != "MRML") {
+    throw InputError(mrmlPath.string() + ": not a MRML scene (no <MRML> root element, or malformed XML)");
+  }
+  vtkXMLDataElement* root = parser->GetRootElement();
+  std::map<std::string, ParsedElement> byId;
+  std::vector<std::string> order;
+  for (int i = 0; i < root->GetNumberOfNestedElements(); ++i) {
+    vtkXMLDataElement* xml = root->GetNestedElement(i);
+    ParsedElement e;
+    e.tag = xml->GetName();
+    for (int a = 0; a < xml->GetNumberOfAttributes(); ++a) e.attributes[xml->GetAttributeName(a)] = xml->GetAttributeValue(a);
+    const std::string id = e.get("id");
+    if (id.empty()) continue;
+    byId[id] = e;
+    order.push_back(id);
+  }
+  const fs::path sceneFolder = mrmlPath.has_parent_path() ? mrmlPath.parent_path() : fs::path(".");
+  auto find = [&](const std::vector<std::string>& ids) -> const ParsedElement* {
+    for (const auto& id : ids) {
+      auto it = byId.find(id);
+      if (it != byId.end()) return &it->second;
+    }
+    return nullptr;
+  };
+  auto storageFileOf = [&](const ParsedElement& e) -> fs::path {
+    const ParsedElement* storage = find(e.references("storage"));
+    if (!storage || storage->get("fileName").empty()) {
+      throw InputError(mrmlPath.string() + ": node '" + e.get("name") + "' (" + e.get("id") + ") has no storage file");
+    }
+    fs::path file = decodeFileName(storage->get("fileName"));
+    if (file.is_relative()) file = sceneFolder / file;
+    file = file.lexically_normal();
+    std::error_code missing;
+    if (!fs::exists(file, missing)) {
+      throw InputError(mrmlPath.string() + ": node '" + e.get("name") + "' refers to " + file.string() +
+                       ", which does not exist");
+    }
+    return file;
+  };
+  // A data file's error, prefixed with the scene that refers to it.
+  auto withSceneContext = [&](auto&& read) {
+    try {
+      return read();
+    } catch (const InputError& error) {
+      throw InputError(mrmlPath.string() + ": " + error.what());
+    }
+  };
+
+  std::vector<std::pair<std::string, std::shared_ptr<Node>>> loaded; // old id -> node
+  std::map<std::string, std::string> parentOf;                      // old id -> old parent transform id
+  std::map<std::string, std::map<std::string, std::vector<NamedPoint>>> landmarkSides; // pairs name -> side -> points
+  std::map<std::string, std::pair<std::string, std::string>> landmarkInfo;            // pairs name -> (old id, role)
+
+  for (const std::string& id : order) {
+    const ParsedElement& e = byId[id];
+    std::shared_ptr<Node> node;
+    const std::string name = e.get("name", id);
+    if (e.tag == "Volume" || e.tag == "LabelMapVolume") {
+      const fs::path file = storageFileOf(e);
+      const ParsedElement* display = find(e.references("display"));
+      if (e.tag == "Volume" && e.get("labelMap") != "1") {
+        auto volume = ScalarVolumeNode::create(name, withSceneContext([&] { return readScalarVolume(file); }));
+        volume->setDisplay(readVolumeDisplay(display, VolumeDisplay{}));
+        node = volume;
+      } else {
+        auto labels = LabelMapVolumeNode::create(name, withSceneContext([&] { return readLabelVolume(file); }));
+        labels->setDisplay(readVolumeDisplay(display, VolumeDisplay{"Labels", {}, {}, {}, {}, 1.0}));
+        node = labels;
+      }
+      node->setStorageFile(fs::absolute(file));
+    } else if (e.tag == "Model") {
+      const fs::path file = storageFileOf(e);
+      auto model = ModelNode::create(name, withSceneContext([&] { return readModel(file); }));
+      model->setDisplay(readModelDisplay(find(e.references("display"))));
+      model->setStorageFile(fs::absolute(file));
+      node = model;
+    } else if (e.tag == "LinearTransform" || e.tag == "GridTransform" || e.tag == "Transform" ||
+               e.tag == "BSplineTransform") {
+      const fs::path file = storageFileOf(e);
+      auto transform = TransformNode::create(name, withSceneContext([&] { return readTransform(file); }));
+      transform->setStorageFile(fs::absolute(file));
+      node = transform;
+    } else if (e.tag == "MarkupsFiducial") {
+      const fs::path file = storageFileOf(e);
+      const auto attributes = decodeAttributes(e.get("attributes"));
+      auto pairs = attributes.find(PairsAttribute);
+      auto side = attributes.find(SideAttribute);
+      if (pairs == attributes.end() || side == attributes.end()) continue; // a point list that is not a pair set
+      landmarkSides[pairs->second][side->second] = withSceneContext([&] { return readMarkupsJson(file); });
+      if (side->second == "preop") {
+        auto role = attributes.find(RoleAttribute);
+        landmarkInfo[pairs->second] = {id, role != attributes.end() ? role->second : ""};
+        const auto transforms = e.references("transform");
+        if (!transforms.empty()) parentOf[id] = transforms.front();
+      }
+      continue;
+    } else {
+      continue; // display and storage nodes, and node kinds the workflow does not use
+    }
+    auto attributes = decodeAttributes(e.get("attributes"));
+    if (auto role = attributes.find(RoleAttribute); role != attributes.end()) {
+      node->setRole(role->second);
+      attributes.erase(role);
+    }
+    for (const auto& [key, value] : attributes) node->setAttribute(key, value);
+    const auto transforms = e.references("transform");
+    if (!transforms.empty()) parentOf[id] = transforms.front();
+    node->markStored();
+    loaded.emplace_back(id, node);
+  }
+
+  for (const auto& [name, sides] : landmarkSides) {
+    auto preop = sides.find("preop");
+    auto intraop = sides.find("intraop");
+    if (preop == sides.end() || intraop == sides.end()) {
+      throw InputError(mrmlPath.string() + ": landmark pairs '" + name + "' lack their " +
+                       (preop == sides.end() ? "preop" : "intraop") + " point list");
+    }
+    std::map<std::string, PhysicalPoint> intraopByName;
+    for (const NamedPoint& p : intraop->second) intraopByName[p.name] = p.position;
+    std::vector<LandmarkPair> pairs;
+    for (const NamedPoint& p : preop->second) {
+      auto match = intraopByName.find(p.name);
+      if (match == intraopByName.end()) {
+        throw InputError(mrmlPath.string() + ": landmark '" + p.name + "' of '" + name + "' has no intraop point");
+      }
+      pairs.push_back({p.name, p.position, match->second});
+    }
+    auto node = LandmarksNode::create(name, pairs);
+    node->setRole(landmarkInfo[name].second);
+    node->markStored();
+    loaded.emplace_back(landmarkInfo[name].first, node);
+  }
+
+  // Everything read: now add, then resolve transform placement to the new ids.
+  std::map<std::string, std::string> newIdOf;
+  for (auto& [oldId, node] : loaded) {
+    scene.addNode(node);
+    newIdOf[oldId] = node->id();
+  }
+  for (auto& [oldId, node] : loaded) {
+    auto parent = parentOf.find(oldId);
+    if (parent != parentOf.end() && newIdOf.count(parent->second)) node->setParentTransformId(newIdOf[parent->second]);
+  }
+}
+
+} // namespace brainshift

@@ -1,0 +1,56 @@
+#pragma once
+// Scalar volumes (MRI, fMRI statistics, MRA) and label maps.
+#include "ImageTypes.h"
+#include "Node.h"
+
+#include <memory>
+#include <optional>
+
+namespace brainshift {
+
+/// How a volume is shown. Colour tables are named as Slicer names them ("Grey", "Labels",
+/// "ColdToHotRainbow", ...).
+struct VolumeDisplay {
+  std::string colorTable = "Grey";
+  std::optional<double> window;       ///< unset: automatic window/level
+  std::optional<double> level;
+  std::optional<double> lowerThreshold; ///< overlays: values between the thresholds are hidden
+  std::optional<double> upperThreshold;
+  double opacity = 1.0;
+};
+
+class ScalarVolumeNode : public Node {
+public:
+  static std::shared_ptr<ScalarVolumeNode> create(const std::string& name, ScalarImage::Pointer image = nullptr);
+  NodeKind kind() const override { return NodeKind::ScalarVolume; }
+  const char* slicerClassName() const override { return "vtkMRMLScalarVolumeNode"; }
+
+  ScalarImage* image() const { return image_.GetPointer(); }
+  void setImage(ScalarImage::Pointer image);
+
+  const VolumeDisplay& display() const { return display_; }
+  void setDisplay(const VolumeDisplay& display);
+
+private:
+  ScalarImage::Pointer image_;
+  VolumeDisplay display_;
+};
+
+class LabelMapVolumeNode : public Node {
+public:
+  static std::shared_ptr<LabelMapVolumeNode> create(const std::string& name, LabelImage::Pointer image = nullptr);
+  NodeKind kind() const override { return NodeKind::LabelMapVolume; }
+  const char* slicerClassName() const override { return "vtkMRMLLabelMapVolumeNode"; }
+
+  LabelImage* image() const { return image_.GetPointer(); }
+  void setImage(LabelImage::Pointer image);
+
+  const VolumeDisplay& display() const { return display_; }
+  void setDisplay(const VolumeDisplay& display);
+
+private:
+  LabelImage::Pointer image_;
+  VolumeDisplay display_{"Labels", {}, {}, {}, {}, 1.0};
+};
+
+} // namespace brainshift

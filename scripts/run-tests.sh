@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The second README command: builds if needed and runs every test (CTest), under a virtual X
+# server when one is available (the rendering and GUI tests need it).
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+build=${BRAINSHIFT_BUILD_DIR:-$root/build}
+bash "$root/scripts/build.sh"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+if command -v xvfb-run >/dev/null 2>&1; then
+  xvfb-run -a ctest --test-dir "$build" -j"$(nproc)" --output-on-failure "$@"
+else
+  ctest --test-dir "$build" -j"$(nproc)" --output-on-failure "$@"
+fi
