@@ -1,6 +1,7 @@
 #include "ModelIO.h"
 
 #include "AtomicFile.h"
+#include "FileNames.h"
 #include "BrainShiftErrors.h"
 
 #include <vtkDataSetReader.h>
@@ -29,12 +30,6 @@ namespace {
 // header line. Without a tag Slicer assumes RAS, so BrainShift always writes one.
 constexpr const char* SpaceArrayName = "SPACE";
 
-std::string extensionOf(const fs::path& path)
-{
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext;
-}
 
 std::string spaceTagOf(vtkPointSet* model)
 {
@@ -73,7 +68,7 @@ vtkSmartPointer<vtkPointSet> readModel(const fs::path& path)
   if (!fs::is_regular_file(path, ec)) {
     throw InputError(path.string() + ": no such file");
   }
-  const std::string ext = extensionOf(path);
+  const std::string ext = lowerCaseFileName(path.extension());
   vtkSmartPointer<vtkPointSet> model;
   std::string space;
   if (ext == ".vtp" || ext == ".vtu") {
@@ -114,7 +109,7 @@ vtkSmartPointer<vtkPointSet> readModel(const fs::path& path)
 void writeModel(vtkPointSet* model, const fs::path& path)
 {
   if (!model) throw std::invalid_argument("writeModel: no model for " + path.string());
-  const std::string ext = extensionOf(path);
+  const std::string ext = lowerCaseFileName(path.extension());
   const bool isPolyData = vtkPolyData::SafeDownCast(model) != nullptr;
   const bool isGrid = vtkUnstructuredGrid::SafeDownCast(model) != nullptr;
   if ((ext == ".vtp" && !isPolyData) || (ext == ".vtu" && !isGrid) || (ext == ".vtk" && !isPolyData && !isGrid) ||

@@ -1,6 +1,7 @@
 #include "TransformIO.h"
 
-#include "AtomicFile.h"
+#include "AtomicItkWrite.h"
+#include "FileNames.h"
 #include "VolumeIO.h"
 
 #include <itkCompositeTransform.h>
@@ -20,24 +21,9 @@ using FieldTransform = itk::DisplacementFieldTransform<double, 3>;
 using DoubleField = FieldTransform::DisplacementFieldType;
 using MatrixOffsetTransform = itk::MatrixOffsetTransformBase<double, 3, 3>;
 
-std::string lowerCaseName(const fs::path& path)
+bool isTransformFile(const fs::path& path)
 {
-  std::string name = path.filename().string();
-  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return std::tolower(c); });
-  return name;
-}
-
-bool endsWith(const std::string& s, const std::string& suffix)
-{
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-bool isTransformFileName(const std::string& name)
-{
-  for (const char* ext : {".tfm", ".txt", ".mat", ".h5", ".hdf5"}) {
-    if (endsWith(name, ext)) return true;
-  }
-  return false;
+  return hasExtension(path, {".tfm", ".txt", ".mat", ".h5", ".hdf5"});
 }
 } // namespace
 
@@ -84,8 +70,7 @@ SpatialTransform::Pointer readTransform(const fs::path& path)
   if (!fs::is_regular_file(path, ec)) {
     throw InputError(path.string() + ": no such file");
   }
-  const std::string name = lowerCaseName(path);
-  if (!isTransformFileName(name)) {
+  if (!isTransformFile(path)) {
     if (!isVolumePath(path)) {
       throw InputError(path.string() +
                        ": not a transform file (expected .tfm, .txt, .mat, .h5, or a displacement field image)");
@@ -118,8 +103,7 @@ SpatialTransform::Pointer readTransform(const fs::path& path)
 void writeTransform(const SpatialTransform* transform, const fs::path& path)
 {
   registerIOFactories();
-  const std::string name = lowerCaseName(path);
-  if (!isTransformFileName(name)) {
+  if (!isTransformFile(path)) {
     DisplacementFieldImage::Pointer field = displacementFieldOf(transform);
     if (!field) {
       throw std::invalid_argument("cannot write " + describeTransform(transform) + " to " + path.string() +
@@ -128,20 +112,12 @@ void writeTransform(const SpatialTransform* transform, const fs::path& path)
     writeDisplacementField(field, path);
     return;
   }
-  if (dynamic_cast<const CompositeTransform*>(transform) && !(endsWith(name, ".h5") || endsWith(name, ".hdf5"))) {
+  if (dynamic_cast<const CompositeTransform*>(transform) && !hasExtension(path, {".h5", ".hdf5"})) {
     throw std::invalid_argument("cannot write a composite transform to " + path.string() + ": use .h5");
   }
-  AtomicFile file(path);
   auto writer = itk::TransformFileWriterTemplate<double>::New();
   writer->SetInput(transform);
-  writer->SetFileName(file.temporaryPath().string());
-  writer->SetUseCompression(true);
-  try {
-    writer->Update();
-  } catch (const itk::ExceptionObject& e) {
-    throw std::runtime_error("cannot write " + path.string() + ": " + e.GetDescription());
-  }
-  file.commit();
+  writeAtomically(writer.GetPointer(), path);
 }
 
 bool isLinearTransform(const SpatialTransform* transform)

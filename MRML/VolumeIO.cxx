@@ -1,6 +1,7 @@
 #include "VolumeIO.h"
 
-#include "AtomicFile.h"
+#include "AtomicItkWrite.h"
+#include "FileNames.h"
 
 #include <itkCastImageFilter.h>
 #include <itkGDCMImageIO.h>
@@ -50,21 +51,9 @@ void registerIOFactories()
 
 namespace {
 
-std::string lowerCaseName(const fs::path& path)
+bool isNiftiFile(const fs::path& path)
 {
-  std::string name = path.filename().string();
-  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return std::tolower(c); });
-  return name;
-}
-
-bool endsWith(const std::string& s, const std::string& suffix)
-{
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-bool isNiftiName(const std::string& name)
-{
-  return endsWith(name, ".nii") || endsWith(name, ".nii.gz");
+  return hasExtension(path, {".nii", ".nii.gz"});
 }
 
 void requireExistingFile(const fs::path& path)
@@ -333,7 +322,6 @@ template <class TOutputPixel, class TInputImage>
 void writeAs(const TInputImage* image, const fs::path& path)
 {
   using OutputImage = itk::Image<TOutputPixel, 3>;
-  AtomicFile file(path);
   auto writer = itk::ImageFileWriter<OutputImage>::New();
   typename OutputImage::Pointer converted;
   if constexpr (std::is_same_v<OutputImage, TInputImage>) {
@@ -354,14 +342,7 @@ void writeAs(const TInputImage* image, const fs::path& path)
     }
   }
   writer->SetInput(converted);
-  writer->SetFileName(file.temporaryPath().string());
-  writer->SetUseCompression(true);
-  try {
-    writer->Update();
-  } catch (const itk::ExceptionObject& e) {
-    throw std::runtime_error("cannot write " + path.string() + ": " + e.GetDescription());
-  }
-  file.commit();
+  writeAtomically(writer.GetPointer(), path);
 }
 
 } // namespace
@@ -370,11 +351,7 @@ bool isVolumePath(const fs::path& path)
 {
   std::error_code ec;
   if (fs::is_directory(path, ec)) return true;
-  const std::string name = lowerCaseName(path);
-  for (const char* ext : {".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"}) {
-    if (endsWith(name, ext)) return true;
-  }
-  return false;
+  return hasExtension(path, {".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"});
 }
 
 ScalarImage::Pointer readDicomSeries(const fs::path& folder, Warnings* warnings)
@@ -417,10 +394,10 @@ ScalarImage::Pointer readScalarVolume(const fs::path& path, Warnings* warnings)
     return readDicomSeries(path, warnings);
   }
   readImageHeader(path, 1);
-  if (isNiftiName(lowerCaseName(path))) checkNiftiVoxelData(path);
+  if (isNiftiFile(path)) checkNiftiVoxelData(path);
   ScalarImage::Pointer image = readImageFile<ScalarImage>(path);
   requireFinite(image, path);
-  if (isNiftiName(lowerCaseName(path))) {
+  if (isNiftiFile(path)) {
     checkNiftiOrientation(path, image->GetOrigin(), warnings);
   }
   return image;
@@ -452,7 +429,7 @@ LabelImage::Pointer readLabelVolume(const fs::path& path, Warnings* warnings)
 DisplacementFieldImage::Pointer readDisplacementField(const fs::path& path)
 {
   readImageHeader(path, 3);
-  if (isNiftiName(lowerCaseName(path))) checkNiftiVoxelData(path);
+  if (isNiftiFile(path)) checkNiftiVoxelData(path);
   DisplacementFieldImage::Pointer field = readImageFile<DisplacementFieldImage>(path);
   const std::size_t n = field->GetLargestPossibleRegion().GetNumberOfPixels();
   const DisplacementVector* d = field->GetBufferPointer();

@@ -4,6 +4,7 @@
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "LandmarkIO.h"
+#include "SyntheticData.h"
 
 #include <fstream>
 #include <vector>
@@ -11,17 +12,9 @@
 namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
+using brainshift::testing::point;
 
 constexpr const char* ContractHeader = "name,preop_x,preop_y,preop_z,intraop_x,intraop_y,intraop_z";
-
-PhysicalPoint point(double x, double y, double z)
-{
-  PhysicalPoint p;
-  p[0] = x;
-  p[1] = y;
-  p[2] = z;
-  return p;
-}
 
 fs::path writeText(const fs::path& path, const std::string& text)
 {

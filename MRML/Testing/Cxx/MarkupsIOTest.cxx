@@ -4,6 +4,7 @@
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "MarkupsIO.h"
+#include "SyntheticData.h"
 
 #include <fstream>
 #include <vector>
@@ -11,15 +12,7 @@
 namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
-
-PhysicalPoint point(double x, double y, double z)
-{
-  PhysicalPoint p;
-  p[0] = x;
-  p[1] = y;
-  p[2] = z;
-  return p;
-}
+using brainshift::testing::point;
 
 /// The numbers of every "position": [...] array in a JSON text, as written.
 std::vector<std::string> positionNumbers(const std::string& json)

@@ -3,16 +3,13 @@
 #include "BrainShiftTestingSupport.h"
 #include "BrainShiftErrors.h"
 #include "ModelIO.h"
+#include "SyntheticData.h"
 
-#include <vtkCellArray.h>
 #include <vtkCellData.h>
-#include <vtkDoubleArray.h>
 #include <vtkFieldData.h>
 #include <vtkFloatArray.h>
-#include <vtkIntArray.h>
 #include <vtkNew.h>
 #include <vtkPointData.h>
-#include <vtkPoints.h>
 #include <vtkPolyData.h>
 #include <vtkStringArray.h>
 #include <vtkUnstructuredGrid.h>
@@ -25,52 +22,10 @@ namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
 
-/// Two triangles with a 3-component point array and a cell array.
-vtkSmartPointer<vtkPolyData> makeSurface()
-{
-  vtkNew<vtkPoints> points;
-  points->SetDataTypeToDouble();
-  points->InsertNextPoint(1.5, -2.25, 3.0);
-  points->InsertNextPoint(40.125, 0.1, -7.0);
-  points->InsertNextPoint(-3.0, 55.5, 12.75);
-  points->InsertNextPoint(20.0, 30.0, 1.0 / 3.0);
-  vtkNew<vtkCellArray> triangles;
-  const vtkIdType faces[2][3] = {{0, 1, 2}, {1, 3, 2}};
-  for (const auto& face : faces) triangles->InsertNextCell(3, face);
-  vtkNew<vtkDoubleArray> displacement;
-  displacement->SetName("Displacement");
-  displacement->SetNumberOfComponents(3);
-  for (int i = 0; i < 4; ++i) displacement->InsertNextTuple3(0.5 * i, -0.25 * i, 1.0 / (i + 1));
-  vtkNew<vtkIntArray> imposed;
-  imposed->SetName("Imposed");
-  imposed->InsertNextValue(1);
-  imposed->InsertNextValue(0);
-  auto surface = vtkSmartPointer<vtkPolyData>::New();
-  surface->SetPoints(points);
-  surface->SetPolys(triangles);
-  surface->GetPointData()->AddArray(displacement);
-  surface->GetCellData()->AddArray(imposed);
-  return surface;
-}
-
-/// Two tetrahedra with a cell array "Label" and a point array.
+/// The two tetrahedra with a point array as well.
 vtkSmartPointer<vtkUnstructuredGrid> makeMesh()
 {
-  vtkNew<vtkPoints> points;
-  points->InsertNextPoint(0, 0, 0);
-  points->InsertNextPoint(10, 0, 0);
-  points->InsertNextPoint(0, 10, 0);
-  points->InsertNextPoint(0, 0, 10);
-  points->InsertNextPoint(10, 10, 10);
-  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
-  mesh->SetPoints(points);
-  const vtkIdType tets[2][4] = {{0, 1, 2, 3}, {1, 2, 3, 4}};
-  for (const auto& tet : tets) mesh->InsertNextCell(VTK_TETRA, 4, tet);
-  vtkNew<vtkIntArray> label;
-  label->SetName("Label");
-  label->InsertNextValue(2);
-  label->InsertNextValue(4);
-  mesh->GetCellData()->AddArray(label);
+  const vtkSmartPointer<vtkUnstructuredGrid> mesh = testing::makeTwoTetrahedra();
   vtkNew<vtkFloatArray> magnitude;
   magnitude->SetName("DisplacementMagnitude");
   for (float value : {0.0f, 0.5f, 1.25f, 2.0f, 3.5f}) magnitude->InsertNextValue(value);
@@ -131,7 +86,7 @@ int ModelIOTest(int, char*[])
     const fs::path folder = testing::temporaryFolder("ModelIOTest");
 
     // A surface: the file is tagged LPS; the tag describes the file and is not returned.
-    const vtkSmartPointer<vtkPolyData> surface = makeSurface();
+    const vtkSmartPointer<vtkPolyData> surface = testing::makeTriangleSurface();
     const fs::path vtp = folder / "surface.vtp";
     writeModel(surface, vtp);
     BS_CHECK(spaceTagOfFile(vtp) == "LPS");

@@ -2,6 +2,7 @@
 // transform re-parenting on removal, node ownership, and the lookups.
 #include "BrainShiftTestingSupport.h"
 #include "Scene.h"
+#include "SyntheticData.h"
 
 #include <itkTranslationTransform.h>
 
@@ -19,13 +20,7 @@ struct RecordedEvent {
 
 ScalarImage::Pointer smallImage()
 {
-  auto image = ScalarImage::New();
-  ScalarImage::RegionType region;
-  region.SetSize({{4, 4, 4}});
-  image->SetRegions(region);
-  image->Allocate();
-  image->FillBuffer(1.0f);
-  return image;
+  return testing::makeUniformImage({{4, 4, 4}}, 1.0f);
 }
 
 SpatialTransform::Pointer translation(double x)

@@ -7,28 +7,20 @@
 #include "BrainShiftTestingSupport.h"
 #include "MarkupsIO.h"
 #include "SceneIO.h"
+#include "SyntheticData.h"
 
 #include <itkCompositeTransform.h>
-#include <itkEuler3DTransform.h>
 #include <itkImageRegionIteratorWithIndex.h>
-#include <itkVersor.h>
 
-#include <vtkCellArray.h>
 #include <vtkCellData.h>
 #include <vtkFieldData.h>
-#include <vtkFloatArray.h>
-#include <vtkIntArray.h>
 #include <vtkNew.h>
 #include <vtkPointData.h>
-#include <vtkPoints.h>
-#include <vtkPolyData.h>
 #include <vtkStringArray.h>
-#include <vtkUnstructuredGrid.h>
 #include <vtkXMLDataElement.h>
 #include <vtkXMLDataParser.h>
 #include <vtkXMLPolyDataReader.h>
 
-#include <cmath>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -36,53 +28,18 @@
 namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
+using brainshift::testing::point;
 
 // ---- The scene's data ---------------------------------------------------------------------
-PhysicalPoint point(double x, double y, double z)
+/// The grid of both volumes: 12x10x8 anisotropic voxels, oblique.
+ImageGeometry volumeGrid()
 {
-  PhysicalPoint p;
-  p[0] = x;
-  p[1] = y;
-  p[2] = z;
-  return p;
-}
-
-ScalarImage::DirectionType obliqueDirection()
-{
-  itk::Versor<double> rotation;
-  itk::Versor<double>::VectorType axis;
-  axis[0] = 1;
-  axis[1] = 2;
-  axis[2] = -1;
-  rotation.Set(axis, 20.0 * M_PI / 180.0);
-  return rotation.GetMatrix();
-}
-
-template <class TImage>
-typename TImage::Pointer makeImage()
-{
-  auto image = TImage::New();
-  typename TImage::RegionType region;
-  region.SetSize({{12, 10, 8}});
-  image->SetRegions(region);
-  typename TImage::SpacingType spacing;
-  spacing[0] = 1.2;
-  spacing[1] = 0.9;
-  spacing[2] = 2.0;
-  image->SetSpacing(spacing);
-  typename TImage::PointType origin;
-  origin[0] = -20.5;
-  origin[1] = 14.25;
-  origin[2] = 3.125;
-  image->SetOrigin(origin);
-  image->SetDirection(obliqueDirection());
-  image->Allocate();
-  return image;
+  return testing::grid({{12, 10, 8}}, {1.2, 0.9, 2.0}, point(-20.5, 14.25, 3.125), testing::rotationAbout(1, 2, -1, 20.0));
 }
 
 ScalarImage::Pointer makeIntensities()
 {
-  auto image = makeImage<ScalarImage>();
+  auto image = testing::makeImage<ScalarImage>(volumeGrid());
   itk::ImageRegionIteratorWithIndex<ScalarImage> it(image, image->GetLargestPossibleRegion());
   for (; !it.IsAtEnd(); ++it) {
     const auto i = it.GetIndex();
@@ -93,7 +50,7 @@ ScalarImage::Pointer makeIntensities()
 
 LabelImage::Pointer makeLabels()
 {
-  auto image = makeImage<LabelImage>();
+  auto image = testing::makeImage<LabelImage>(volumeGrid());
   itk::ImageRegionIteratorWithIndex<LabelImage> it(image, image->GetLargestPossibleRegion());
   for (; !it.IsAtEnd(); ++it) {
     const auto i = it.GetIndex();
@@ -102,90 +59,11 @@ LabelImage::Pointer makeLabels()
   return image;
 }
 
-/// A tetrahedron's surface, coloured by "DisplacementMagnitude".
-vtkSmartPointer<vtkPolyData> makeSurface()
-{
-  vtkNew<vtkPoints> points;
-  points->InsertNextPoint(0, 0, 0);
-  points->InsertNextPoint(30.5, 0, 1);
-  points->InsertNextPoint(0, -25.25, 2);
-  points->InsertNextPoint(3, 4, 40.125);
-  vtkNew<vtkCellArray> triangles;
-  const vtkIdType faces[4][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
-  for (const auto& face : faces) triangles->InsertNextCell(3, face);
-  vtkNew<vtkFloatArray> magnitude;
-  magnitude->SetName("DisplacementMagnitude");
-  for (float value : {0.0f, 1.5f, 3.25f, 4.75f}) magnitude->InsertNextValue(value);
-  auto surface = vtkSmartPointer<vtkPolyData>::New();
-  surface->SetPoints(points);
-  surface->SetPolys(triangles);
-  surface->GetPointData()->AddArray(magnitude);
-  return surface;
-}
-
-/// Two tetrahedra sharing a face, with a cell array "Label".
-vtkSmartPointer<vtkUnstructuredGrid> makeMesh()
-{
-  vtkNew<vtkPoints> points;
-  points->InsertNextPoint(0, 0, 0);
-  points->InsertNextPoint(10, 0, 0);
-  points->InsertNextPoint(0, 10, 0);
-  points->InsertNextPoint(0, 0, 10);
-  points->InsertNextPoint(10, 10, 10);
-  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
-  mesh->SetPoints(points);
-  const vtkIdType tets[2][4] = {{0, 1, 2, 3}, {1, 2, 3, 4}};
-  for (const auto& tet : tets) mesh->InsertNextCell(VTK_TETRA, 4, tet);
-  vtkNew<vtkIntArray> label;
-  label->SetName("Label");
-  label->InsertNextValue(2);
-  label->InsertNextValue(4);
-  mesh->GetCellData()->AddArray(label);
-  return mesh;
-}
-
-itk::Euler3DTransform<double>::Pointer makeRigid()
-{
-  auto rigid = itk::Euler3DTransform<double>::New();
-  itk::Euler3DTransform<double>::CenterType centre;
-  centre[0] = 10;
-  centre[1] = -5;
-  centre[2] = 20;
-  rigid->SetCenter(centre);
-  rigid->SetRotation(0.1, -0.2, 0.3);
-  itk::Euler3DTransform<double>::OutputVectorType translation;
-  translation[0] = 5;
-  translation[1] = -3;
-  translation[2] = 2;
-  rigid->SetTranslation(translation);
-  return rigid;
-}
-
 /// A smooth displacement field on a 6x6x6 grid of 4 mm around the origin.
 SpatialTransform::Pointer makeWarp()
 {
-  auto field = DisplacementFieldImage::New();
-  DisplacementFieldImage::RegionType region;
-  region.SetSize({{6, 6, 6}});
-  field->SetRegions(region);
-  DisplacementFieldImage::SpacingType spacing;
-  spacing.Fill(4.0);
-  field->SetSpacing(spacing);
-  DisplacementFieldImage::PointType origin;
-  origin.Fill(-10.0);
-  field->SetOrigin(origin);
-  field->Allocate();
-  itk::ImageRegionIteratorWithIndex<DisplacementFieldImage> it(field, region);
-  for (; !it.IsAtEnd(); ++it) {
-    PhysicalPoint p;
-    field->TransformIndexToPhysicalPoint(it.GetIndex(), p);
-    DisplacementVector d;
-    d[0] = static_cast<float>(1.5 * std::sin(p[1] / 7.0));
-    d[1] = static_cast<float>(-0.75 * std::cos(p[2] / 5.0));
-    d[2] = static_cast<float>(0.05 * p[0]);
-    it.Set(d);
-  }
-  return makeDisplacementFieldTransform(field);
+  return makeDisplacementFieldTransform(
+    testing::makeSmoothDisplacementField(testing::grid({{6, 6, 6}}, {4.0, 4.0, 4.0}, point(-10, -10, -10))));
 }
 
 std::vector<LandmarkPair> makeLandmarks()
@@ -534,7 +412,7 @@ int SceneRoundTripTest(int, char*[])
     intraop->setDisplay(window);
     scene.add(LabelMapVolumeNode::create("intraop labels", makeLabels()))->setRole("intraop");
 
-    const auto rigidTransform = makeRigid();
+    const auto rigidTransform = testing::makeRigidTransform();
     auto rigid = scene.add(TransformNode::create("rigid", rigidTransform.GetPointer()));
     rigid->setRole("rigid");
     auto warp = scene.add(TransformNode::create("warp", makeWarp()));
@@ -544,7 +422,7 @@ int SceneRoundTripTest(int, char*[])
     composite->AddTransform(rigidTransform->Clone());
     scene.add(TransformNode::create("total", composite.GetPointer()))->setRole("total");
 
-    auto surface = scene.add(ModelNode::create("brain surface", makeSurface()));
+    auto surface = scene.add(ModelNode::create("brain surface", testing::makeTetrahedronSurface()));
     surface->setRole("surface");
     ModelDisplay coloured;
     coloured.scalarVisibility = true;
@@ -553,7 +431,7 @@ int SceneRoundTripTest(int, char*[])
     coloured.opacity = 0.6;
     coloured.scalarRange = std::array<double, 2>{0.0, 5.0};
     surface->setDisplay(coloured);
-    auto mesh = scene.add(ModelNode::create("mesh", makeMesh()));
+    auto mesh = scene.add(ModelNode::create("mesh", testing::makeTwoTetrahedra()));
     mesh->setRole("mesh");
     auto landmarks = scene.add(LandmarksNode::create("landmarks", makeLandmarks()));
     landmarks->setRole("truth");

@@ -1,12 +1,10 @@
 // ITK transform files: rigid transforms through .tfm and .h5, a composite through .h5, and a
 // displacement field as a vector image (x = y + d(y)); the refusals; the affine parameters.
 #include "BrainShiftTestingSupport.h"
+#include "SyntheticData.h"
 #include "TransformIO.h"
 
 #include <itkCompositeTransform.h>
-#include <itkEuler3DTransform.h>
-#include <itkImageRegionIteratorWithIndex.h>
-#include <itkVersor.h>
 
 #include <fstream>
 #include <vector>
@@ -14,16 +12,8 @@
 namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
+using brainshift::testing::point;
 using CompositeTransform = itk::CompositeTransform<double, 3>;
-
-PhysicalPoint point(double x, double y, double z)
-{
-  PhysicalPoint p;
-  p[0] = x;
-  p[1] = y;
-  p[2] = z;
-  return p;
-}
 
 /// Points inside and outside the field's grid.
 const std::vector<PhysicalPoint>& probePoints()
@@ -44,57 +34,13 @@ void checkSameMapping(const SpatialTransform* expected, const SpatialTransform* 
   }
 }
 
-itk::Euler3DTransform<double>::Pointer makeRigid()
-{
-  auto rigid = itk::Euler3DTransform<double>::New();
-  rigid->SetCenter(point(10, -5, 20));
-  rigid->SetRotation(0.1, -0.2, 0.3);
-  itk::Euler3DTransform<double>::OutputVectorType translation;
-  translation[0] = 5;
-  translation[1] = -3;
-  translation[2] = 2;
-  rigid->SetTranslation(translation);
-  return rigid;
-}
-
-/// A smooth field on an oblique 7x6x5 grid of 3.5 mm.
-DisplacementFieldImage::Pointer makeField()
-{
-  itk::Versor<double> rotation;
-  itk::Versor<double>::VectorType axis;
-  axis[0] = 0;
-  axis[1] = 1;
-  axis[2] = 3;
-  rotation.Set(axis, 15.0 * M_PI / 180.0);
-  auto field = DisplacementFieldImage::New();
-  DisplacementFieldImage::RegionType region;
-  region.SetSize({{7, 6, 5}});
-  field->SetRegions(region);
-  DisplacementFieldImage::SpacingType spacing;
-  spacing.Fill(3.5);
-  field->SetSpacing(spacing);
-  field->SetOrigin(point(-10, -9, -7));
-  field->SetDirection(rotation.GetMatrix());
-  field->Allocate();
-  itk::ImageRegionIteratorWithIndex<DisplacementFieldImage> it(field, region);
-  for (; !it.IsAtEnd(); ++it) {
-    PhysicalPoint p;
-    field->TransformIndexToPhysicalPoint(it.GetIndex(), p);
-    DisplacementVector d;
-    d[0] = static_cast<float>(1.5 * std::sin(p[1] / 7.0));
-    d[1] = static_cast<float>(-0.75 * std::cos(p[2] / 5.0));
-    d[2] = static_cast<float>(0.05 * p[0] + 0.1);
-    it.Set(d);
-  }
-  return field;
-}
 } // namespace
 
 int TransformIOTest(int, char*[])
 {
   return brainshift::testing::runTest("TransformIOTest", [&] {
     const fs::path folder = testing::temporaryFolder("TransformIOTest");
-    const auto rigid = makeRigid();
+    const auto rigid = testing::makeRigidTransform();
 
     // Rigid: .tfm (text) and .h5 keep the transform and its type.
     for (const char* name : {"rigid.tfm", "rigid.h5"}) {
@@ -112,8 +58,10 @@ int TransformIOTest(int, char*[])
       BS_CHECK_NEAR(affine.translation[r], rigid->GetOffset()[r], 1e-12);
     }
 
-    // A displacement field as a vector image: readTransform maps y to y + d(y).
-    const DisplacementFieldImage::Pointer field = makeField();
+    // A displacement field as a vector image: readTransform maps y to y + d(y). The field is smooth,
+    // on an oblique 7x6x5 grid of 3.5 mm.
+    const DisplacementFieldImage::Pointer field = testing::makeSmoothDisplacementField(
+      testing::grid({{7, 6, 5}}, {3.5, 3.5, 3.5}, point(-10, -9, -7), testing::rotationAbout(0, 1, 3, 15.0)), 0.1);
     const SpatialTransform::Pointer warp = makeDisplacementFieldTransform(field);
     BS_CHECK(!isLinearTransform(warp));
     BS_CHECK_THROWS(affineParametersOf(warp), std::invalid_argument, "not linear");

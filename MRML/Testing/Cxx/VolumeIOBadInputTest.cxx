@@ -3,6 +3,7 @@
 // temporary files behind.
 #include "BrainShiftTestingSupport.h"
 #include "OrientationPhantom.h"
+#include "SyntheticData.h"
 #include "VolumeIO.h"
 
 #include <itkImageFileWriter.h>
@@ -18,13 +19,7 @@ namespace fs = std::filesystem;
 
 ScalarImage::Pointer smallImage(float value)
 {
-  auto image = ScalarImage::New();
-  ScalarImage::RegionType region;
-  region.SetSize({{6, 5, 4}});
-  image->SetRegions(region);
-  image->Allocate();
-  image->FillBuffer(value);
-  return image;
+  return testing::makeUniformImage({{6, 5, 4}}, value);
 }
 
 std::string contentOf(const fs::path& path)

@@ -3,9 +3,8 @@
 // sform disagree is read with one warning.
 #include "BrainShiftTestingSupport.h"
 #include "OrientationPhantom.h"
+#include "SyntheticData.h"
 #include "VolumeIO.h"
-
-#include <itkVersor.h>
 
 #include <cstdint>
 #include <cstring>
@@ -78,15 +77,9 @@ int VolumeIOOrientationTest(int, char*[])
     spacing[0] = 1.2;
     spacing[1] = 0.9;
     spacing[2] = 2.0;
-    itk::Versor<double> rotation;
-    itk::Versor<double>::VectorType axis;
-    axis[0] = 1;
-    axis[1] = -1;
-    axis[2] = 2;
-    rotation.Set(axis, 20.0 * M_PI / 180.0);
     const PhysicalPoint centre{{12.5, -30.0, 41.0}};
     const testing::OrientationPhantom phantom =
-      testing::makeOrientationPhantom({{72, 90, 44}}, spacing, rotation.GetMatrix(), centre);
+      testing::makeOrientationPhantom({{72, 90, 44}}, spacing, testing::rotationAbout(1, -1, 2, 20.0), centre);
     checkSpheres(phantom, phantom.image, "the phantom itself");
 
     for (const char* name : {"phantom.nii.gz", "phantom.nrrd", "phantom.mha"}) {
