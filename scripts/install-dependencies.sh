@@ -7,7 +7,7 @@ packages=(
   # build tools
   build-essential cmake ninja-build ccache pkg-config git
   # imaging and geometry
-  libinsighttoolkit5-dev libvtk9-dev libeigen3-dev libcgal-dev
+  libinsighttoolkit5-dev libvtk9-dev libeigen3-dev libcgal-dev libnanoflann-dev
   # finite elements and parallel solve
   petsc-dev libopenmpi-dev openmpi-bin
   # desktop

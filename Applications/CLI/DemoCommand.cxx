@@ -156,12 +156,11 @@ void addDemoCommand(CLI::App& app)
     run.preopLabels = files.preopLabels;
     run.intraopImage = files.intraopImage;
     run.overlays = {"fmri=" + files.preopFmri.string()};
-    RegistrationInputs inputs = loadRegistrationInputs({run.preopImage, run.preopLabels, run.intraopImage,
-                                                        {parseOverlayArgument(run.overlays.front())}});
-    report.addWarnings(inputs.warnings);
+    RunContext context(run, configuration, report);
+    context.loadAllInputs();
     bool pipelineComplete = false;
     try {
-      runPipeline(run, configuration, report);
+      runPipeline(context);
       pipelineComplete = true;
     } catch (const NotAvailableError& e) {
       report.addWarning(std::string(e.what()) + "; the demo evaluates what exists");

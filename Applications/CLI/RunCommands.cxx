@@ -46,11 +46,62 @@ Configuration configurationFor(const RunOptions& options)
   return configuration;
 }
 
+RunContext::RunContext(RunOptions options, Configuration configuration, RunReport& report)
+  : options_(std::move(options))
+  , configuration_(std::move(configuration))
+  , report_(report)
+{
+}
+
+void RunContext::loadAllInputs()
+{
+  RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, options_.intraopImage, {}};
+  for (const std::string& overlay : options_.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
+  inputs_ = loadRegistrationInputs(paths);
+  preopImage_ = inputs_->preopImage;
+  preopLabels_ = inputs_->preopLabels;
+  intraopImage_ = inputs_->intraopImage;
+  report_.addWarnings(inputs_->warnings);
+}
+
+namespace {
+ScalarImage::Pointer readRequired(const fs::path& path, const char* flag, const std::string& stage, RunReport& report)
+{
+  if (path.empty()) throw InputError("stage '" + stage + "' needs " + flag);
+  Warnings warnings;
+  ScalarImage::Pointer image = readIntensityImage(path, &warnings);
+  report.addWarnings(warnings);
+  return image;
+}
+} // namespace
+
+const ScalarImage& RunContext::preopImage(const std::string& stage)
+{
+  if (!preopImage_) preopImage_ = readRequired(options_.preopImage, "--preop-image", stage, report_);
+  return *preopImage_;
+}
+
+const ScalarImage& RunContext::intraopImage(const std::string& stage)
+{
+  if (!intraopImage_) intraopImage_ = readRequired(options_.intraopImage, "--intraop-image", stage, report_);
+  return *intraopImage_;
+}
+
+const LabelImage* RunContext::preopLabelsIfGiven()
+{
+  if (!preopLabels_ && !options_.preopLabels.empty()) {
+    Warnings warnings;
+    preopLabels_ = readLabelVolume(options_.preopLabels, &warnings);
+    report_.addWarnings(warnings);
+  }
+  return preopLabels_.GetPointer();
+}
+
 const std::vector<PipelineStage>& pipelineStages()
 {
   static const std::vector<PipelineStage> stages = {
     {"rigid", "rigid registration of the intraoperative to the preoperative MRI by mutual information "
-              "(writes rigid_intraop_to_preop.tfm)", nullptr},
+              "(writes rigid_intraop_to_preop.tfm)", runRigidStage},
     {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)", nullptr},
     {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", nullptr},
     {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
@@ -61,7 +112,7 @@ const std::vector<PipelineStage>& pipelineStages()
   return stages;
 }
 
-void runPipeline(const RunOptions& options, const Configuration& configuration, RunReport& report)
+void runPipeline(RunContext& context)
 {
   for (const PipelineStage& stage : pipelineStages()) {
     if (!stage.run) {
@@ -69,8 +120,8 @@ void runPipeline(const RunOptions& options, const Configuration& configuration, 
                               ") is not available yet in this build");
     }
     std::cout << "[" << stage.name << "]\n" << std::flush;
-    stage.run(options, configuration, report);
-    report.save();
+    stage.run(context);
+    context.report().save();
   }
 }
 

@@ -1,12 +1,13 @@
 #pragma once
 // What `register`, its stages and `demo` share: the flags, the configuration with the flags over
-// it, and the pipeline of stages in order.
+// it, the inputs read once, and the pipeline of stages in order.
 #include "Commands.h"
 #include "Configuration.h"
 #include "RegistrationInputs.h"
 #include "RunReport.h"
 
 #include <functional>
+#include <optional>
 
 namespace brainshift::cli {
 
@@ -19,12 +20,41 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
 /// The configuration file (or the defaults) with the command-line flags over it, validated.
 Configuration configurationFor(const RunOptions& options);
 
+/// One run of stages on one case: its options, configuration and report, and its inputs, each read
+/// and checked once, when a stage first asks for it.
+class RunContext {
+public:
+  RunContext(RunOptions options, Configuration configuration, RunReport& report);
+
+  const RunOptions& options() const { return options_; }
+  const Configuration& configuration() const { return configuration_; }
+  RunReport& report() { return report_; }
+  std::filesystem::path output(const std::string& fileName) const { return options_.outputDir / fileName; }
+
+  /// Reads and checks every input given on the command line at once (`register` does this first).
+  void loadAllInputs();
+  /// InputError naming the missing flag when the stage needs an input it was not given.
+  const ScalarImage& preopImage(const std::string& stage);
+  const ScalarImage& intraopImage(const std::string& stage);
+  /// The labels when given, else null.
+  const LabelImage* preopLabelsIfGiven();
+
+private:
+  RunOptions options_;
+  Configuration configuration_;
+  RunReport& report_;
+  std::optional<RegistrationInputs> inputs_;
+  ScalarImage::Pointer preopImage_, intraopImage_;
+  LabelImage::Pointer preopLabels_;
+};
+
 /// A stage of the intraoperative update, as the command line runs it.
 struct PipelineStage {
   std::string name;    ///< the subcommand
   std::string summary; ///< one line for --help
-  /// Runs the stage on the case in `options.outputDir`; empty while the stage is not built.
-  std::function<void(const RunOptions&, const Configuration&, RunReport&)> run;
+  /// Runs the stage on the case; empty while the stage is not built. A result that cannot be
+  /// trusted is a MethodError (exit 1).
+  std::function<void(RunContext&)> run;
 };
 
 /// The stages in the order `register` runs them.
@@ -32,6 +62,9 @@ const std::vector<PipelineStage>& pipelineStages();
 
 /// Runs the stages in order, saving the report after each. Stops at the first stage that is not
 /// built with NotAvailableError; a failing stage stops the pipeline with its reason.
-void runPipeline(const RunOptions& options, const Configuration& configuration, RunReport& report);
+void runPipeline(RunContext& context);
+
+/// The stage runners (StageRunners.cxx).
+void runRigidStage(RunContext& context);
 
 } // namespace brainshift::cli

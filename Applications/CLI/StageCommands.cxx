@@ -55,11 +55,11 @@ void addRegisterCommand(CLI::App& app)
                 true, true);
   command->callback([options] {
     const Configuration configuration = configurationFor(*options);
-    RegistrationInputs inputs = loadRegistrationInputs(inputPathsOf(*options));
     RunReport report(options->outputDir / "report.json");
-    report.addWarnings(inputs.warnings);
+    RunContext context(*options, configuration, report);
+    context.loadAllInputs();
     try {
-      runPipeline(*options, configuration, report);
+      runPipeline(context);
     } catch (const MethodError& e) {
       report.addWarning(e.what());
       report.save();
@@ -82,20 +82,12 @@ void addStageCommands(CLI::App& app)
         throw NotAvailableError("stage '" + stage.name + "' is not available yet in this build");
       }
       RunReport report(options->outputDir / "report.json");
-      stage.run(*options, configuration, report);
+      RunContext context(*options, configuration, report);
+      stage.run(context);
       report.save();
     });
   }
 }
 
-void addBenchCommand(CLI::App& app)
-{
-  CLI::App* command = app.add_subcommand("bench", "Speed and accuracy measurements, and the charts of one against the other");
-  command->allow_extras();
-  command->callback([] {
-    throw NotAvailableError("bench: the speed-against-accuracy study is not available yet in this build "
-                            "(it arrives with the stages it measures)");
-  });
-}
 
 } // namespace brainshift::cli

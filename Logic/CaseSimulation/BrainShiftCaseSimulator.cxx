@@ -2,6 +2,7 @@
 
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
+#include "IntensityStatistics.h"
 #include "VolumeIO.h"
 
 #include <itkCompositeTransform.h>
@@ -272,56 +273,6 @@ void fillHolesPerSlice(MaskImage* mask, const Grid& g)
   }
 }
 
-/// Otsu thresholds for `classes` classes of the values selected by `mask` (256 bins over [lo, hi]).
-std::vector<double> otsuThresholds(const float* values, const unsigned char* mask, std::size_t n, int classes,
-                                   double lo, double hi)
-{
-  constexpr int Bins = 256;
-  std::vector<double> histogram(Bins, 0.0);
-  double total = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (mask && !mask[i]) continue;
-    const int b = std::clamp(int((values[i] - lo) / (hi - lo) * (Bins - 1) + 0.5), 0, Bins - 1);
-    histogram[b] += 1;
-    total += 1;
-  }
-  auto binValue = [&](int b) { return lo + (hi - lo) * b / (Bins - 1); };
-  std::vector<double> p(Bins), cumulative(Bins + 1, 0), cumulativeMean(Bins + 1, 0);
-  for (int b = 0; b < Bins; ++b) {
-    p[b] = histogram[b] / total;
-    cumulative[b + 1] = cumulative[b] + p[b];
-    cumulativeMean[b + 1] = cumulativeMean[b] + p[b] * binValue(b);
-  }
-  auto classScore = [&](int from, int to) { // bins [from, to)
-    const double w = cumulative[to] - cumulative[from];
-    if (w <= 0) return 0.0;
-    const double m = cumulativeMean[to] - cumulativeMean[from];
-    return m * m / w;
-  };
-  double best = -1;
-  std::vector<double> thresholds;
-  if (classes == 2) {
-    for (int t = 1; t < Bins; ++t) {
-      const double score = classScore(0, t) + classScore(t, Bins);
-      if (score > best) {
-        best = score;
-        thresholds = {binValue(t)};
-      }
-    }
-  } else {
-    for (int t1 = 1; t1 < Bins - 1; ++t1) {
-      for (int t2 = t1 + 1; t2 < Bins; ++t2) {
-        const double score = classScore(0, t1) + classScore(t1, t2) + classScore(t2, Bins);
-        if (score > best) {
-          best = score;
-          thresholds = {binValue(t1), binValue(t2)};
-        }
-      }
-    }
-  }
-  return thresholds;
-}
-
 /// Averages blocks of 2x2x2 voxels: the anti-aliased 2 mm version of a 1 mm image.
 ScalarImage::Pointer downsampleByTwo(const ScalarImage* image)
 {
@@ -423,7 +374,7 @@ void CaseParameters::validate() const
   require(std::isfinite(shiftMillimetres) && shiftMillimetres >= 0 && shiftMillimetres <= 25,
           "--shift: " + std::to_string(shiftMillimetres) + " mm is outside 0 to 25 mm");
   for (double r : rotationDegrees) {
-    require(std::isfinite(r) && std::abs(r) <= 45, "--rotation: each angle must be within +-45 degrees");
+    require(std::isfinite(r) && std::abs(r) <= 180, "--rotation: each angle must be within +-180 degrees");
   }
   for (double t : translationMillimetres) {
     require(std::isfinite(t) && std::abs(t) <= 50, "--translation: each component must be within +-50 mm");
@@ -491,7 +442,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
 
   const float* intensity = t1->GetBufferPointer();
   const float maxIntensity = *std::max_element(intensity, intensity + N);
-  const double headThreshold = 0.5 * otsuThresholds(intensity, nullptr, N, 2, 0, maxIntensity)[0];
+  const double headThreshold = 0.5 * otsuThresholds(intensity, N, 2, 0, maxIntensity)[0];
   auto headMask = newImage<MaskImage>(G, 0);
   for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = intensity[i] > headThreshold || brain[i];
   headMask = largestComponent(headMask);
@@ -507,7 +458,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
   const unsigned char* head = headMask->GetBufferPointer();
 
   // -- Tissue intensities: CSF, grey and white matter by three-class Otsu inside the brain.
-  const std::vector<double> brainThresholds = otsuThresholds(intensity, brain, N, 3, 0, maxIntensity);
+  const std::vector<double> brainThresholds = otsuThresholds(intensity, N, 3, 0, maxIntensity, brain);
   double classSum[3] = {0, 0, 0}, classCount[3] = {0, 0, 0};
   for (std::size_t i = 0; i < N; ++i) {
     if (!brain[i]) continue;

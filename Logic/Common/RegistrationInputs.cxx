@@ -38,11 +38,17 @@ void requireNotConstant(const ScalarImage* image, const fs::path& path)
 }
 } // namespace
 
+ScalarImage::Pointer readIntensityImage(const fs::path& path, Warnings* warnings)
+{
+  ScalarImage::Pointer image = readScalarVolume(path, warnings);
+  requireNotConstant(image, path);
+  return image;
+}
+
 RegistrationInputs loadRegistrationInputs(const RegistrationInputPaths& paths)
 {
   RegistrationInputs inputs;
-  inputs.preopImage = readScalarVolume(paths.preopImage, &inputs.warnings);
-  requireNotConstant(inputs.preopImage, paths.preopImage);
+  inputs.preopImage = readIntensityImage(paths.preopImage, &inputs.warnings);
   inputs.preopLabels = readLabelVolume(paths.preopLabels, &inputs.warnings);
   const ImageGeometry imageGrid = ImageGeometry::of(inputs.preopImage.GetPointer());
   const ImageGeometry labelGrid = ImageGeometry::of(inputs.preopLabels.GetPointer());
@@ -60,8 +66,7 @@ RegistrationInputs loadRegistrationInputs(const RegistrationInputPaths& paths)
   if (!present.count(2)) {
     warn(&inputs.warnings, paths.preopLabels.string() + ": no brain parenchyma (label 2) in the label map");
   }
-  inputs.intraopImage = readScalarVolume(paths.intraopImage, &inputs.warnings);
-  requireNotConstant(inputs.intraopImage, paths.intraopImage);
+  inputs.intraopImage = readIntensityImage(paths.intraopImage, &inputs.warnings);
   std::set<std::string> names;
   for (const OverlayInput& overlay : paths.overlays) {
     if (!names.insert(overlay.name).second) {

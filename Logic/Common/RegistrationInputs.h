@@ -37,6 +37,9 @@ struct RegistrationInputs {
   Warnings warnings;
 };
 
+/// Reads an intensity image and checks it can be registered (not constant); InputError naming it.
+ScalarImage::Pointer readIntensityImage(const std::filesystem::path& path, Warnings* warnings);
+
 /// Reads and checks every input; the first problem is an InputError naming its file.
 RegistrationInputs loadRegistrationInputs(const RegistrationInputPaths& paths);
 

@@ -65,6 +65,7 @@ n = 64
 nifti(d + '/nan.nii.gz', [float(i) if i != 10 else math.nan for i in range(n)])
 good = d + '/good.nii.gz'
 nifti(good, [float(i) for i in range(n)])
+nifti(d + '/zeros.nii.gz', [0.0] * 512, (8, 8, 8))
 raw = open(good, 'rb').read()
 open(d + '/truncated.nii.gz', 'wb').write(raw[: len(raw) // 2])
 open(d + '/text.nii.gz', 'w').write('this is not an image\n')
@@ -170,11 +171,9 @@ RegisterNotAvailableYet)
 
 StagesNotAvailableYet)
   out=$work/stages-not-yet
-  expect 1 "not available yet" -- "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
-    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   expect 1 "not available yet" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out"
   expect 1 "not available yet" -- "$brainshift" simulate --output-dir "$out" --solver-options "-ksp_type cg"
-  expect 1 "not available yet" -- "$brainshift" bench
+  expect 2 "" -- "$brainshift" bench
   # Bad input is still bad input when the stage is missing.
   expect 2 "no such file" -- "$brainshift" mesh --preop-labels "$out/none.nii.gz" --output-dir "$out"
   ;;
@@ -185,6 +184,32 @@ DemoRefusesForeignFolder)
   printf '{"stages": {"rigid": {"wall_seconds": 1}}, "warnings": []}\n' > "$out/report.json"
   expect 2 "another run" -- "$brainshift" demo --size small --output-dir "$out"
   grep -q '"rigid"' "$out/report.json" || fail "the foreign report was changed"
+  ;;
+
+RigidStage)
+  out=$work/rigid-stage
+  rm -rf "$out"
+  "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out" >/dev/null || fail "rigid exited $?"
+  [ -s "$out/rigid_intraop_to_preop.tfm" ] || fail "rigid wrote no rigid_intraop_to_preop.tfm"
+  for key in wall_seconds metric_value iterations iterations_per_level winning_start_degrees; do
+    json_value "$out/report.json" "['stages']['rigid']['$key']" >/dev/null || fail "report.json lacks rigid.$key"
+  done
+  "$brainshift" evaluate --transform "$out/rigid_intraop_to_preop.tfm" --landmarks "$case_dir/landmarks.csv" \
+    --json "$out/evaluation.json" >/dev/null || fail "evaluate exited $?"
+  float_check "$out/evaluation.json" "['groups']['head']['max_mm']" "< 0.6"
+  # Same inputs, same transform.
+  "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out/again" >/dev/null || fail "rigid exited $?"
+  cmp -s "$out/rigid_intraop_to_preop.tfm" "$out/again/rigid_intraop_to_preop.tfm" || fail "rigid is not deterministic"
+  # An intraoperative image without foreground is bad input; unrelated images are refused (exit 1).
+  make_bad_inputs "$out/inputs"
+  expect 1 "cannot be trusted" -- "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
+    --intraop-image "$case_dir/truth/intraop_labels.nii.gz" --output-dir "$out/labels-as-image"
+  [ -e "$out/labels-as-image/rigid_intraop_to_preop.tfm" ] && fail "an untrusted rigid result was written"
+  grep -q '"trustworthy": false' "$out/labels-as-image/report.json" || fail "report.json does not record the refusal"
+  expect 2 "zeros.nii.gz: a constant image" -- "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
+    --intraop-image "$out/inputs/zeros.nii.gz" --output-dir "$out/zeros"
   ;;
 
 DemoEndToEnd)
@@ -198,6 +223,8 @@ DemoEndToEnd)
   float_check "$demo/evaluation.json" "['transforms']['identity']['mean_mm']" "> 8"
   float_check "$demo/report.json" "['demo']['case_seconds']" "> 0"
   grep -q "not available yet" "$demo/report.json" || fail "the demo report does not name the missing stages"
+  [ -s "$demo/rigid_intraop_to_preop.tfm" ] || fail "the demo's register did not run the rigid stage"
+  float_check "$demo/evaluation.json" "['transforms']['brainshift_rigid']['groups']['head']['max_mm']" "< 0.6"
   ;;
 
 *)

@@ -1,0 +1,448 @@
+#include "RigidRegistrationLogic.h"
+
+#include "IntensityStatistics.h"
+
+#include <itkBinShrinkImageFilter.h>
+#include <itkEuler3DTransform.h>
+#include <itkImageMaskSpatialObject.h>
+#include <itkLinearInterpolateImageFunction.h>
+#include <itkMattesMutualInformationImageToImageMetricv4.h>
+#include <itkMultiThreaderBase.h>
+#include <itkRegistrationParameterScalesFromPhysicalShift.h>
+#include <itkRegularStepGradientDescentOptimizerv4.h>
+#include <itkSignedMaurerDistanceMapImageFilter.h>
+#include <itkVersorRigid3DTransform.h>
+
+#include <algorithm>
+#include <mutex>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <sstream>
+
+namespace brainshift {
+
+namespace {
+
+using Transform = itk::VersorRigid3DTransform<double>;
+using Metric = itk::MattesMutualInformationImageToImageMetricv4<ScalarImage, ScalarImage>;
+using PointSet = Metric::FixedSampledPointSetType;
+using Optimizer = itk::RegularStepGradientDescentOptimizerv4<double>;
+using ScalesEstimator = itk::RegistrationParameterScalesFromPhysicalShift<Metric>;
+using MaskImage = itk::Image<unsigned char, 3>;
+using MaskObject = itk::ImageMaskSpatialObject<3>;
+using Interpolator = itk::LinearInterpolateImageFunction<ScalarImage, double>;
+
+constexpr double Degrees = 180.0 / M_PI;
+
+/// Averages bins of voxels: the image at about `spacingMm`, never finer than it is.
+ScalarImage::Pointer shrinkTo(const ScalarImage& image, double spacingMm)
+{
+  auto shrink = itk::BinShrinkImageFilter<ScalarImage, ScalarImage>::New();
+  shrink->SetInput(&image);
+  itk::BinShrinkImageFilter<ScalarImage, ScalarImage>::ShrinkFactorsType factors;
+  bool any = false;
+  for (unsigned i = 0; i < 3; ++i) {
+    factors[i] = std::max(1u, unsigned(std::lround(spacingMm / image.GetSpacing()[i])));
+    any = any || factors[i] > 1;
+  }
+  if (!any) return const_cast<ScalarImage*>(&image);
+  shrink->SetShrinkFactors(factors);
+  shrink->Update();
+  ScalarImage::Pointer out = shrink->GetOutput();
+  out->DisconnectPipeline();
+  return out;
+}
+
+float maximumOf(const ScalarImage& image)
+{
+  const float* v = image.GetBufferPointer();
+  return *std::max_element(v, v + image.GetLargestPossibleRegion().GetNumberOfPixels());
+}
+
+/// The foreground threshold of an MR image: half of Otsu's split between air and head, so that
+/// dark tissue (CSF, bone next to scalp) counts.
+double foregroundThreshold(const ScalarImage& image)
+{
+  const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
+  return 0.5 * otsuThresholds(image.GetBufferPointer(), n, 2, 0.0, maximumOf(image))[0];
+}
+
+PhysicalPoint centroidOfForeground(const ScalarImage& image, double threshold, const std::function<bool(const PhysicalPoint&)>& keep)
+{
+  double sum[3] = {0, 0, 0}, count = 0;
+  itk::ImageRegionConstIteratorWithIndex<ScalarImage> it(&image, image.GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    if (it.Get() <= threshold) continue;
+    PhysicalPoint p;
+    image.TransformIndexToPhysicalPoint(it.GetIndex(), p);
+    if (keep && !keep(p)) continue;
+    for (int i = 0; i < 3; ++i) sum[i] += p[i];
+    count += 1;
+  }
+  PhysicalPoint c;
+  for (int i = 0; i < 3; ++i) c[i] = count > 0 ? sum[i] / count : std::nan("");
+  return c;
+}
+
+/// `count` random foreground points of `image` (seeded), jittered within their voxel so that the
+/// samples do not sit on one grid.
+PointSet::Pointer sampleForeground(const ScalarImage& image, double threshold, unsigned count, std::uint64_t seed)
+{
+  std::vector<std::size_t> candidates;
+  const float* v = image.GetBufferPointer();
+  const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (v[i] > threshold) candidates.push_back(i);
+  }
+  std::mt19937_64 rng(seed);
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  candidates.resize(std::min<std::size_t>(candidates.size(), count));
+  std::sort(candidates.begin(), candidates.end()); // memory order: faster interpolation
+  std::uniform_real_distribution<double> jitter(-0.5, 0.5);
+  auto points = PointSet::New();
+  points->Initialize();
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  unsigned id = 0;
+  for (std::size_t offset : candidates) {
+    itk::ContinuousIndex<double, 3> index;
+    index[0] = double(offset % size[0]) + jitter(rng);
+    index[1] = double((offset / size[0]) % size[1]) + jitter(rng);
+    index[2] = double(offset / (size[0] * size[1])) + jitter(rng);
+    PointSet::PointType p;
+    image.TransformContinuousIndexToPhysicalPoint(index, p);
+    points->SetPoint(id++, p);
+  }
+  return points;
+}
+
+/// The preoperative head and brain (labels >= 1), dilated, at 2 mm: where the metric may look.
+MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
+{
+  auto mask = ScalarImage::New();
+  mask->CopyInformation(&labels);
+  mask->SetRegions(labels.GetLargestPossibleRegion());
+  mask->Allocate();
+  const LabelPixel* l = labels.GetBufferPointer();
+  float* m = mask->GetBufferPointer();
+  for (std::size_t i = 0, n = labels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) m[i] = l[i] >= 1 ? 1.f : 0.f;
+  ScalarImage::Pointer coarse = shrinkTo(*mask, 2.0);
+  auto binary = MaskImage::New();
+  binary->CopyInformation(coarse);
+  binary->SetRegions(coarse->GetLargestPossibleRegion());
+  binary->Allocate();
+  const std::size_t n = coarse->GetLargestPossibleRegion().GetNumberOfPixels();
+  for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = coarse->GetBufferPointer()[i] > 0.0f;
+  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
+  distance->SetInput(binary);
+  distance->SetUseImageSpacing(true);
+  distance->SetSquaredDistance(false);
+  distance->Update();
+  for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = distance->GetOutput()->GetBufferPointer()[i] <= dilationMm;
+  auto object = MaskObject::New();
+  object->SetImage(binary);
+  object->Update();
+  return object;
+}
+
+struct LevelMetric {
+  Metric::Pointer metric;
+  PointSet::Pointer points;
+};
+
+/// A Mattes metric that sums its samples in one fixed order. ITK 5.2's Mattes metric adds the
+/// work units' derivative contributions under a mutex, in the order they finish, so with several
+/// work units the same inputs gave results 3e-4 mm apart. The number of work units is copied
+/// from ITK's global default when the metric is constructed (SetMaximumNumberOfWorkUnits caps
+/// only threads), so the metric is constructed while that default is one.
+Metric::Pointer newDeterministicMetric()
+{
+  static std::mutex constructing;
+  std::lock_guard<std::mutex> lock(constructing);
+  const itk::ThreadIdType previous = itk::MultiThreaderBase::GetGlobalDefaultNumberOfThreads();
+  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(1);
+  Metric::Pointer metric = Metric::New();
+  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(previous);
+  return metric;
+}
+
+LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points, const MaskObject* mask,
+                       Transform* transform, unsigned bins)
+{
+  LevelMetric level;
+  level.metric = newDeterministicMetric();
+  level.points = points;
+  level.metric->SetNumberOfHistogramBins(bins);
+  level.metric->SetFixedImage(fixed);
+  level.metric->SetMovingImage(moving);
+  level.metric->SetMovingTransform(transform);
+  level.metric->SetUseSampledPointSet(true);
+  level.metric->SetFixedSampledPointSet(points);
+  level.metric->SetUseMovingImageGradientFilter(false);
+  level.metric->SetUseFixedImageGradientFilter(false);
+  if (mask) level.metric->SetMovingImageMask(mask);
+  level.metric->Initialize();
+  return level;
+}
+
+unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iterations)
+{
+  auto scales = ScalesEstimator::New();
+  scales->SetMetric(metric);
+  scales->SetTransformForward(true);
+  auto optimizer = Optimizer::New();
+  optimizer->SetMetric(metric);
+  optimizer->SetScalesEstimator(scales);
+  optimizer->SetDoEstimateLearningRateOnce(false);
+  optimizer->SetDoEstimateLearningRateAtEachIteration(false);
+  optimizer->SetLearningRate(step);
+  optimizer->SetMinimumStepLength(minimumStep);
+  optimizer->SetRelaxationFactor(0.7);
+  optimizer->SetGradientMagnitudeTolerance(1e-8);
+  optimizer->SetNumberOfIterations(iterations);
+  optimizer->SetReturnBestParametersAndValue(true);
+  optimizer->StartOptimization();
+  return optimizer->GetCurrentIteration();
+}
+
+/// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask.
+double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points,
+                                   const Transform& transform, const MaskObject* mask, unsigned bins, double& overlap)
+{
+  auto fixedInterpolator = Interpolator::New();
+  fixedInterpolator->SetInputImage(&fixed);
+  auto movingInterpolator = Interpolator::New();
+  movingInterpolator->SetInputImage(&moving);
+  const double fixedMax = maximumOf(fixed), movingMax = maximumOf(moving);
+  std::vector<double> joint(bins * bins, 0.0), f(bins, 0.0), m(bins, 0.0);
+  double total = 0;
+  const std::size_t n = points.GetNumberOfPoints();
+  for (std::size_t i = 0; i < n; ++i) {
+    const PhysicalPoint p = points.GetPoint(i);
+    const PhysicalPoint q = transform.TransformPoint(p);
+    if (!movingInterpolator->IsInsideBuffer(q) || !fixedInterpolator->IsInsideBuffer(p)) continue;
+    if (mask && !mask->IsInsideInWorldSpace(q)) continue;
+    const unsigned a = std::min(bins - 1, unsigned(std::max(0.0, fixedInterpolator->Evaluate(p) / fixedMax) * bins));
+    const unsigned b = std::min(bins - 1, unsigned(std::max(0.0, movingInterpolator->Evaluate(q) / movingMax) * bins));
+    joint[a * bins + b] += 1;
+    total += 1;
+  }
+  overlap = n ? total / double(n) : 0.0;
+  if (total == 0) return 1.0;
+  double hJoint = 0, hF = 0, hM = 0;
+  for (unsigned a = 0; a < bins; ++a) {
+    for (unsigned b = 0; b < bins; ++b) {
+      const double p = joint[a * bins + b] / total;
+      f[a] += p;
+      m[b] += p;
+      if (p > 0) hJoint -= p * std::log(p);
+    }
+  }
+  for (unsigned k = 0; k < bins; ++k) {
+    if (f[k] > 0) hF -= f[k] * std::log(f[k]);
+    if (m[k] > 0) hM -= m[k] * std::log(m[k]);
+  }
+  return hJoint > 0 ? (hF + hM) / hJoint : 1.0;
+}
+
+void setRotationFromEuler(Transform& transform, double a, double b, double c)
+{
+  auto euler = itk::Euler3DTransform<double>::New();
+  euler->SetRotation(a / Degrees, b / Degrees, c / Degrees);
+  transform.SetMatrix(euler->GetMatrix());
+}
+
+double rotationAngleDegrees(const itk::Matrix<double, 3, 3>& r)
+{
+  const double trace = r(0, 0) + r(1, 1) + r(2, 2);
+  return std::acos(std::clamp((trace - 1.0) / 2.0, -1.0, 1.0)) * Degrees;
+}
+
+} // namespace
+
+void RigidRegistrationParameters::validate() const
+{
+  const std::size_t levels = levelSpacingMm.size();
+  if (levels == 0 || samplesPerLevel.size() != levels || iterationsPerLevel.size() != levels ||
+      stepMmPerLevel.size() != levels || minimumStepMmPerLevel.size() != levels) {
+    throw InputError("rigid registration: every per-level setting needs one value per pyramid level");
+  }
+  for (std::size_t i = 0; i < levels; ++i) {
+    if (!(levelSpacingMm[i] > 0) || samplesPerLevel[i] < 100 || !(stepMmPerLevel[i] > 0) ||
+        !(minimumStepMmPerLevel[i] > 0)) {
+      throw InputError("rigid registration: level " + std::to_string(i) +
+                       " needs a positive spacing and step and at least 100 samples");
+    }
+  }
+  if (histogramBins < 8 || histogramBins > 256) throw InputError("rigid registration: histogram bins must be 8 to 256");
+  if (startAnglesDegrees.empty() || startsOptimized == 0) throw InputError("rigid registration: no start to try");
+}
+
+double rotationDifferenceDegrees(const SpatialTransform& a, const SpatialTransform& b)
+{
+  const AffineParameters pa = affineParametersOf(&a), pb = affineParametersOf(&b);
+  itk::Matrix<double, 3, 3> product; // A * B^T
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      double s = 0;
+      for (int k = 0; k < 3; ++k) s += pa.matrix[r][k] * pb.matrix[c][k];
+      product(r, c) = s;
+    }
+  }
+  return rotationAngleDegrees(product);
+}
+
+RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                        const RigidRegistrationParameters& parameters)
+{
+  parameters.validate();
+  RigidRegistrationResult result;
+  const std::size_t levels = parameters.levelSpacingMm.size();
+
+  // The pyramid, coarsest first.
+  std::vector<ScalarImage::Pointer> fixedLevels, movingLevels;
+  for (double spacing : parameters.levelSpacingMm) {
+    fixedLevels.push_back(shrinkTo(intraop, spacing));
+    movingLevels.push_back(shrinkTo(preop, spacing));
+  }
+  const double fixedThreshold = foregroundThreshold(*fixedLevels.front());
+  const double movingThreshold = foregroundThreshold(*movingLevels.front());
+  MaskObject::Pointer mask = preopLabels ? movingMaskFrom(*preopLabels, parameters.maskDilationMm) : nullptr;
+
+  // Start: the fixed foreground centroid maps to the moving foreground centroid, measured over
+  // the part of the preoperative head that the intraoperative field of view covers.
+  const ScalarImage& coarseFixed = *fixedLevels.front();
+  const PhysicalPoint fixedCentre = centroidOfForeground(coarseFixed, fixedThreshold, nullptr);
+  if (!std::isfinite(fixedCentre[0])) {
+    throw InputError("the intraoperative image has no foreground to register");
+  }
+  PhysicalPoint movingCentre = centroidOfForeground(*movingLevels.front(), movingThreshold, nullptr);
+  if (!std::isfinite(movingCentre[0])) throw InputError("the preoperative image has no foreground to register");
+  for (int pass = 0; pass < 3; ++pass) {
+    const itk::Vector<double, 3> shift = movingCentre - fixedCentre;
+    const PhysicalPoint refined = centroidOfForeground(*movingLevels.front(), movingThreshold, [&](const PhysicalPoint& x) {
+      itk::ContinuousIndex<double, 3> index;
+      return coarseFixed.TransformPhysicalPointToContinuousIndex(x - shift, index);
+    });
+    if (!std::isfinite(refined[0])) break;
+    movingCentre = refined;
+  }
+
+  auto transform = Transform::New();
+  transform->SetCenter(fixedCentre);
+  if (parameters.initialIntraopToPreop) {
+    const AffineParameters start = affineParametersOf(parameters.initialIntraopToPreop);
+    Transform::MatrixType matrix;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) matrix(r, c) = start.matrix[r][c];
+    }
+    transform->SetMatrix(matrix);
+    // y -> A y + t written about the centre: translation = A c + t - c.
+    Transform::OutputVectorType translation;
+    for (int r = 0; r < 3; ++r) {
+      double s = start.translation[r] - fixedCentre[r];
+      for (int c = 0; c < 3; ++c) s += start.matrix[r][c] * fixedCentre[c];
+      translation[r] = s;
+    }
+    transform->SetTranslation(translation);
+  } else {
+    transform->SetTranslation(movingCentre - fixedCentre);
+  }
+
+  for (std::size_t level = 0; level < levels; ++level) {
+    PointSet::Pointer points = sampleForeground(*fixedLevels[level], fixedThreshold, parameters.samplesPerLevel[level],
+                                                parameters.seed + level);
+    LevelMetric metric = makeMetric(fixedLevels[level], movingLevels[level], points, mask, transform, parameters.histogramBins);
+
+    if (level == 0 && !parameters.initialIntraopToPreop) {
+      // Multi-start: score every start, optimize the best few, keep the best end.
+      const Transform::ParametersType translationOnly = transform->GetParameters();
+      struct Start {
+        double value;
+        std::array<double, 3> angles;
+      };
+      std::vector<Start> starts;
+      for (double a : parameters.startAnglesDegrees) {
+        for (double b : parameters.startAnglesDegrees) {
+          for (double c : parameters.startAnglesDegrees) {
+            transform->SetParameters(translationOnly);
+            setRotationFromEuler(*transform, a, b, c);
+            const double value = metric.metric->GetValue();
+            if (metric.metric->GetNumberOfValidPoints() < points->GetNumberOfPoints() / 4) continue;
+            starts.push_back({value, {a, b, c}});
+          }
+        }
+      }
+      result.startsScored = unsigned(starts.size());
+      if (starts.empty()) {
+        throw MethodError("rigid registration: no start overlaps the preoperative image; the images do not show the same anatomy");
+      }
+      std::sort(starts.begin(), starts.end(), [](const Start& x, const Start& y) { return x.value < y.value; });
+      double bestValue = std::numeric_limits<double>::max();
+      Transform::ParametersType best;
+      unsigned bestIterations = 0;
+      for (std::size_t s = 0; s < std::min<std::size_t>(parameters.startsOptimized, starts.size()); ++s) {
+        transform->SetParameters(translationOnly);
+        setRotationFromEuler(*transform, starts[s].angles[0], starts[s].angles[1], starts[s].angles[2]);
+        const unsigned iterations = optimize(metric.metric, parameters.stepMmPerLevel[0], parameters.minimumStepMmPerLevel[0],
+                                             parameters.iterationsPerLevel[0]);
+        const double value = metric.metric->GetValue();
+        if (value < bestValue) {
+          bestValue = value;
+          best = transform->GetParameters();
+          bestIterations = iterations;
+          result.winningStartDegrees = starts[s].angles;
+        }
+      }
+      transform->SetParameters(best);
+      result.iterationsPerLevel.push_back(bestIterations);
+    } else {
+      result.iterationsPerLevel.push_back(optimize(metric.metric, parameters.stepMmPerLevel[level],
+                                                   parameters.minimumStepMmPerLevel[level],
+                                                   parameters.iterationsPerLevel[level]));
+    }
+
+    if (level + 1 == levels) {
+      result.metricValue = metric.metric->GetValue();
+      result.normalizedMutualInformation = normalizedMutualInformation(
+        *fixedLevels[level], *movingLevels[level], *points, *transform, mask, parameters.histogramBins, result.overlap);
+    }
+  }
+
+  result.intraopToPreop = transform.GetPointer();
+  result.rotationDegrees = rotationAngleDegrees(transform->GetMatrix());
+  result.translationMm = (transform->TransformPoint(fixedCentre) - fixedCentre).GetNorm();
+
+  // Can the result be trusted?
+  std::ostringstream why;
+  if (result.overlap < parameters.minimumOverlap) {
+    why << "only " << int(100 * result.overlap) << " % of the intraoperative foreground lands on the preoperative head";
+  } else if (result.normalizedMutualInformation < parameters.minimumNormalizedMutualInformation) {
+    why << "normalized mutual information " << result.normalizedMutualInformation << " is below "
+        << parameters.minimumNormalizedMutualInformation << ", far from what an alignment of these images gives";
+  } else if (result.rotationDegrees > parameters.maximumRotationDegrees) {
+    why << "a rotation of " << result.rotationDegrees << " degrees is implausible for a head in the scanner";
+  }
+  result.failureReason = why.str();
+  result.trustworthy = result.failureReason.empty();
+  if (result.trustworthy) {
+    std::ostringstream w;
+    if (result.overlap < parameters.warningOverlap) {
+      w << "rigid: only " << int(100 * result.overlap) << " % of the intraoperative foreground overlaps the preoperative head";
+      result.warnings.push_back(w.str());
+    }
+    if (result.normalizedMutualInformation < parameters.warningNormalizedMutualInformation) {
+      std::ostringstream m;
+      m << "rigid: normalized mutual information is low (" << result.normalizedMutualInformation << "); check the alignment";
+      result.warnings.push_back(m.str());
+    }
+    if (result.rotationDegrees > parameters.warningRotationDegrees) {
+      std::ostringstream r;
+      r << "rigid: a large rotation (" << result.rotationDegrees << " degrees); check the alignment";
+      result.warnings.push_back(r.str());
+    }
+  }
+  return result;
+}
+
+} // namespace brainshift

@@ -1,0 +1,71 @@
+#pragma once
+// Rigid registration of the intraoperative MRI (fixed) to the preoperative MRI (moving) by
+// Mattes mutual information (ITK v4 metric and optimizer), over a three-level pyramid, from a
+// start that does not depend on luck: the foreground centroids (corrected for the
+// intraoperative field of view) and a multi-start over rotations at the coarsest level. The
+// result is the contract's `rigid_intraop_to_preop`: it maps an intraoperative point to the
+// preoperative point it shows. Sampling is seeded: same inputs, same transform.
+#include "BrainShiftErrors.h"
+#include "ImageTypes.h"
+#include "TransformIO.h"
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+struct RigidRegistrationParameters {
+  /// Voxel size of each pyramid level, coarsest first, in mm: each image is bin-shrunk (averaged)
+  /// by the whole factor per axis that comes closest without going below its own spacing.
+  std::vector<double> levelSpacingMm{4.0, 2.0, 1.0};
+  std::vector<unsigned> samplesPerLevel{12000, 30000, 60000};
+  std::vector<unsigned> iterationsPerLevel{100, 80, 50};
+  std::vector<double> stepMmPerLevel{3.0, 1.0, 0.5};     ///< first step of the optimizer
+  std::vector<double> minimumStepMmPerLevel{0.05, 0.02, 0.01};
+  unsigned histogramBins = 32;
+  /// Multi-start: Euler angles (degrees) tried about each axis; every combination is scored at
+  /// the coarsest level and the best `startsOptimized` are optimized there.
+  std::vector<double> startAnglesDegrees{-40.0, -20.0, 0.0, 20.0, 40.0};
+  unsigned startsOptimized = 4;
+  /// The preoperative labels (head and brain, dilated by this much) limit the metric.
+  double maskDilationMm = 8.0;
+  std::uint64_t seed = 2000;
+  /// A known start (for example the previous scan's result): used instead of the multi-start.
+  SpatialTransform::ConstPointer initialIntraopToPreop;
+
+  // When the result cannot be trusted (exit 1) and when it only deserves a warning.
+  double minimumOverlap = 0.5, warningOverlap = 0.8;
+  // Calibrated on the built-in case (Testing/Benchmarks/rigid): good alignments give 1.20 to 1.33, a
+  // wrong optimum 9.6 degrees off gave 1.078, gross failures 1.01 to 1.03.
+  double minimumNormalizedMutualInformation = 1.12, warningNormalizedMutualInformation = 1.17;
+  double warningRotationDegrees = 45.0, maximumRotationDegrees = 90.0;
+
+  void validate() const; ///< InputError for inconsistent or absurd values
+};
+
+struct RigidRegistrationResult {
+  SpatialTransform::Pointer intraopToPreop; ///< an itk::VersorRigid3DTransform
+  double metricValue = 0;                   ///< Mattes MI at the finest level (negative: better)
+  double normalizedMutualInformation = 0;   ///< (H(F) + H(M)) / H(F, M) on the finest samples, 1..2
+  double overlap = 0;                       ///< fraction of fixed samples landing in the moving mask
+  double rotationDegrees = 0, translationMm = 0; ///< of the result, about the fixed foreground centre
+  std::vector<unsigned> iterationsPerLevel;
+  std::array<double, 3> winningStartDegrees{}; ///< the multi-start's winning Euler angles
+  unsigned startsScored = 0;
+  bool trustworthy = true;
+  std::string failureReason; ///< why not, when not
+  Warnings warnings;
+};
+
+/// Registers; the images may be anisotropic and on different grids. InputError for images
+/// without foreground; the result says whether it can be trusted.
+RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop,
+                                        const LabelImage* preopLabels, const RigidRegistrationParameters& parameters);
+
+/// The angle (degrees) of the rotation that takes `a`'s rotation to `b`'s, and the distance
+/// between their images of `point`: how far apart two rigid transforms are.
+double rotationDifferenceDegrees(const SpatialTransform& a, const SpatialTransform& b);
+
+} // namespace brainshift
