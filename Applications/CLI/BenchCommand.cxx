@@ -6,7 +6,9 @@
 #include "Commands.h"
 #include "LandmarkEvaluation.h"
 #include "RigidRegistrationLogic.h"
+#include "LabelOverlap.h"
 #include "RunReport.h"
+#include "TissueClassificationLogic.h"
 #include "VolumeIO.h"
 
 #include <itkEuler3DTransform.h>
@@ -174,6 +176,97 @@ void runRigidBench(const RigidBenchOptions& o)
   writeTextFileAtomically(o.outputDir / "capture_range.csv", csv.str());
 }
 
+struct ClassifyBenchOptions {
+  fs::path outputDir;
+  std::string size = "full";
+  std::vector<double> noise{0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3};
+  std::vector<double> bias{0, 0.2, 0.4, 0.6, 0.8};
+  unsigned runs = 3;
+  std::uint64_t seed = 2000;
+};
+
+struct ClassificationScore {
+  double brainDice, ventricleDice, parenchymaDice, surfaceMm, seconds;
+  TissueClassificationResult result;
+};
+
+/// Rigid registration, then classification, scored against the case's true labels.
+ClassificationScore classifyCase(const SimulatedCase& c, bool n4)
+{
+  const RigidRegistrationResult rigid = registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, {});
+  TissueClassificationParameters parameters;
+  parameters.biasCorrection = n4;
+  Stopwatch clock;
+  ClassificationScore score{};
+  score.result = classifyTissues(*c.intraopImage, *c.preopLabels, *rigid.intraopToPreop, std::nullopt, parameters);
+  score.seconds = clock.seconds();
+  score.brainDice = diceCoefficient(*score.result.labels, *c.intraopLabels, {2, 3, 4});
+  score.ventricleDice = diceCoefficient(*score.result.labels, *c.intraopLabels, {3});
+  score.parenchymaDice = diceCoefficient(*score.result.labels, *c.intraopLabels, {2});
+  score.surfaceMm = meanSurfaceDistanceMm(*score.result.labels, *c.intraopLabels, {2, 3, 4});
+  return score;
+}
+
+void runClassifyBench(const ClassifyBenchOptions& o)
+{
+  if (o.runs == 0) throw InputError("--runs must be at least 1");
+  const CaseParameters defaults = caseOfSize(o.size, o.seed);
+  std::printf("bench classify: %s case, %u runs\n", o.size.c_str(), o.runs);
+  const SimulatedCase simulated = simulateCase(defaults);
+  std::vector<double> knn, stage;
+  ClassificationScore score{};
+  for (unsigned run = 0; run < o.runs; ++run) {
+    score = classifyCase(simulated, false);
+    knn.push_back(score.result.knnSeconds);
+    stage.push_back(score.seconds);
+  }
+  auto medianOf = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const json speed = {{"size", o.size},
+                      {"runs", o.runs},
+                      {"noise", defaults.noiseFraction},
+                      {"bias", defaults.biasStrength},
+                      {"voxels", score.result.voxels},
+                      {"knn_queries", score.result.knnQueries},
+                      {"knn_seconds", knn},
+                      {"stage_seconds", stage},
+                      {"knn_seconds_median", medianOf(knn)},
+                      {"stage_seconds_median", medianOf(stage)},
+                      {"brain_dice", score.brainDice},
+                      {"ventricle_dice", score.ventricleDice},
+                      {"parenchyma_dice", score.parenchymaDice},
+                      {"brain_surface_distance_mm", score.surfaceMm}};
+  writeTextFileAtomically(o.outputDir / "classification_speed.json", speed.dump(2) + "\n");
+  std::printf("  brain Dice %.3f, ventricles %.3f, surface %.2f mm; k-NN %.2f s, stage %.2f s\n", score.brainDice,
+              score.ventricleDice, score.surfaceMm, medianOf(knn), medianOf(stage));
+
+  std::ostringstream csv;
+  csv << "variable,value,n4,brain_dice,ventricle_dice,parenchyma_dice,brain_surface_distance_mm,stage_seconds\n";
+  auto row = [&](const char* variable, double value, bool n4, const CaseParameters& parameters) {
+    const SimulatedCase c = simulateCase(parameters);
+    const ClassificationScore s = classifyCase(c, n4);
+    csv << variable << ',' << value << ',' << n4 << ',' << s.brainDice << ',' << s.ventricleDice << ',' << s.parenchymaDice
+        << ',' << s.surfaceMm << ',' << s.seconds << '\n';
+    std::printf("  %s %.2f%s: brain %.3f, ventricles %.3f, surface %.2f mm\n", variable, value, n4 ? " (N4)" : "", s.brainDice,
+                s.ventricleDice, s.surfaceMm);
+    std::fflush(stdout);
+  };
+  for (double noise : o.noise) {
+    CaseParameters parameters = defaults;
+    parameters.noiseFraction = noise;
+    row("noise", noise, false, parameters);
+  }
+  for (double bias : o.bias) {
+    CaseParameters parameters = defaults;
+    parameters.biasStrength = bias;
+    row("bias", bias, false, parameters);
+    row("bias", bias, true, parameters);
+  }
+  writeTextFileAtomically(o.outputDir / "classification_sweep.csv", csv.str());
+}
+
 } // namespace
 
 void addBenchCommand(CLI::App& app)
@@ -193,6 +286,25 @@ void addBenchCommand(CLI::App& app)
   command->add_option("--runs", rigid->runs, "timed runs on the default case")->capture_default_str();
   command->add_option("--seed", rigid->seed, "seed of the cases and directions")->capture_default_str();
   command->callback([rigid] { runRigidBench(*rigid); });
+
+  auto classify = std::make_shared<ClassifyBenchOptions>();
+  CLI::App* classifyCommand = bench->add_subcommand(
+    "classify", "Tissue classification: speed, and Dice against noise and bias (with and without N4)");
+  classifyCommand->add_option("--output-dir", classify->outputDir, "where the measurements go")->required();
+  classifyCommand->add_option("--size", classify->size, "full or small case")->capture_default_str();
+  classifyCommand->add_option("--noise", classify->noise, "noise fractions")->delimiter(',')->capture_default_str();
+  classifyCommand->add_option("--bias", classify->bias, "bias field strengths")->delimiter(',')->capture_default_str();
+  classifyCommand->add_option("--runs", classify->runs, "timed runs on the default case")->capture_default_str();
+  classifyCommand->add_option("--seed", classify->seed, "seed of the cases")->capture_default_str();
+  classifyCommand->callback([classify] {
+    for (double v : classify->noise) {
+      if (!(v >= 0 && v <= 0.5)) throw InputError("--noise: each must be within 0 to 0.5");
+    }
+    for (double v : classify->bias) {
+      if (!(v >= 0 && v <= 1)) throw InputError("--bias: each must be within 0 to 1");
+    }
+    runClassifyBench(*classify);
+  });
 }
 
 } // namespace brainshift::cli

@@ -18,6 +18,7 @@ struct RunOptions {
   std::optional<int> ranks;
   std::optional<double> meshResolutionMm;
   std::optional<std::string> solverOptions;
+  std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
 };
 
 void addEvaluateCommand(CLI::App& app);

@@ -1,7 +1,9 @@
 #include "AtomicFile.h"
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
+#include "LabelOverlap.h"
 #include "LandmarkEvaluation.h"
+#include "VolumeIO.h"
 #include "RunCommands.h"
 #include "SceneIO.h"
 
@@ -185,6 +187,18 @@ void addDemoCommand(CLI::App& app)
                        {"pairs", simulated.landmarks.size()},
                        {"pipeline_complete", pipelineComplete},
                        {"transforms", transforms}};
+    if (fs::exists(out / "intraop_labels.nii.gz", ec)) {
+      const LabelImage::Pointer classified = readLabelVolume(out / "intraop_labels.nii.gz");
+      const LabelImage& truthLabels = *simulated.intraopLabels;
+      evaluation["classification"] = {
+        {"brain_dice", diceCoefficient(*classified, truthLabels, {2, 3, 4})},
+        {"ventricle_dice", diceCoefficient(*classified, truthLabels, {3})},
+        {"parenchyma_dice", diceCoefficient(*classified, truthLabels, {2})},
+        {"brain_surface_distance_mm", meanSurfaceDistanceMm(*classified, truthLabels, {2, 3, 4})}};
+      const json& c = evaluation["classification"];
+      std::printf("classification: brain Dice %.3f, ventricles %.3f, brain surface distance %.2f mm\n",
+                  c["brain_dice"].get<double>(), c["ventricle_dice"].get<double>(), c["brain_surface_distance_mm"].get<double>());
+    }
     writeTextFileAtomically(out / "evaluation.json", evaluation.dump(2) + "\n");
     report.save();
 

@@ -9,7 +9,7 @@ namespace brainshift::cli {
 namespace fs = std::filesystem;
 
 void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInputs, unsigned offeredInputs,
-                   bool solverFlags, bool meshFlags)
+                   bool solverFlags, bool meshFlags, bool classificationFlags)
 {
   auto input = [&](InputFlag flag, const char* name, fs::path& target, const char* help) {
     if (!(offeredInputs & unsigned(flag))) return;
@@ -26,6 +26,11 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
   }
   command->add_option("--output-dir", options.outputDir, "the case's output folder")->required();
   command->add_option("--config", options.config, "JSON configuration (materials, mesh, solver); flags override it");
+  if (classificationFlags) {
+    command->add_option("--prototypes", options.prototypes,
+                        "classification prototypes: a previous scan's classification_prototypes.json, or a .mrk.json of "
+                        "points named by tissue (parenchyma-1, ventricles-2, ...); default: chosen automatically");
+  }
   if (meshFlags) {
     command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 3)");
   }
@@ -97,12 +102,19 @@ const LabelImage* RunContext::preopLabelsIfGiven()
   return preopLabels_.GetPointer();
 }
 
+const LabelImage& RunContext::preopLabels(const std::string& stage)
+{
+  if (options_.preopLabels.empty()) throw InputError("stage '" + stage + "' needs --preop-labels");
+  return *preopLabelsIfGiven();
+}
+
 const std::vector<PipelineStage>& pipelineStages()
 {
   static const std::vector<PipelineStage> stages = {
     {"rigid", "rigid registration of the intraoperative to the preoperative MRI by mutual information "
               "(writes rigid_intraop_to_preop.tfm)", runRigidStage},
-    {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)", nullptr},
+    {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)",
+     runClassifyStage},
     {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", nullptr},
     {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)", nullptr},

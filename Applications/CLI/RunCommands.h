@@ -15,7 +15,7 @@ enum class InputFlag { PreopImage = 1, PreopLabels = 2, IntraopImage = 4, Overla
 
 /// Declares the flags of RunOptions on `command`; `required` inputs are marked required.
 void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInputs, unsigned offeredInputs,
-                   bool solverFlags, bool meshFlags);
+                   bool solverFlags, bool meshFlags, bool classificationFlags = false);
 
 /// The configuration file (or the defaults) with the command-line flags over it, validated.
 Configuration configurationFor(const RunOptions& options);
@@ -38,6 +38,7 @@ public:
   const ScalarImage& intraopImage(const std::string& stage);
   /// The labels when given, else null.
   const LabelImage* preopLabelsIfGiven();
+  const LabelImage& preopLabels(const std::string& stage);
 
 private:
   RunOptions options_;
@@ -66,5 +67,6 @@ void runPipeline(RunContext& context);
 
 /// The stage runners (StageRunners.cxx).
 void runRigidStage(RunContext& context);
+void runClassifyStage(RunContext& context);
 
 } // namespace brainshift::cli

@@ -52,7 +52,7 @@ void addRegisterCommand(CLI::App& app)
   auto options = std::make_shared<RunOptions>();
   CLI::App* command = app.add_subcommand("register", "The whole intraoperative update: every stage, in order");
   addRunOptions(command, *options, PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays,
-                true, true);
+                true, true, true);
   command->callback([options] {
     const Configuration configuration = configurationFor(*options);
     RunReport report(options->outputDir / "report.json");
@@ -74,7 +74,7 @@ void addStageCommands(CLI::App& app)
     auto options = std::make_shared<RunOptions>();
     CLI::App* command = app.add_subcommand(stage.name, "Stage alone: " + stage.summary);
     const StageFlags flags = flagsOf(stage.name);
-    addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh);
+    addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh, stage.name == "classify");
     command->callback([options, stage] {
       const Configuration configuration = configurationFor(*options);
       checkGivenInputs(*options);

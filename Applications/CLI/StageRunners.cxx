@@ -3,12 +3,15 @@
 #include "BrainShiftErrors.h"
 #include "RigidRegistrationLogic.h"
 #include "RunCommands.h"
+#include "TissueClassificationLogic.h"
 #include "TransformIO.h"
+#include "VolumeIO.h"
 
 #include <cstdio>
 #include <numeric>
 
 namespace brainshift::cli {
+namespace fs = std::filesystem;
 
 void runRigidStage(RunContext& context)
 {
@@ -39,6 +42,56 @@ void runRigidStage(RunContext& context)
   writeTransform(result.intraopToPreop, context.output("rigid_intraop_to_preop.tfm"));
   std::printf("  rigid: rotation %.2f degrees, translation %.2f mm, NMI %.3f, overlap %.2f, %.2f s\n",
               result.rotationDegrees, result.translationMm, result.normalizedMutualInformation, result.overlap, seconds);
+}
+
+} // namespace brainshift::cli
+
+namespace brainshift::cli {
+
+void runClassifyStage(RunContext& context)
+{
+  Stopwatch clock;
+  const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm");
+  std::error_code ec;
+  if (!fs::exists(rigidFile, ec)) {
+    throw InputError(rigidFile.string() + ": no rigid transform; run `brainshift rigid` on this output folder first");
+  }
+  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  std::optional<std::vector<TissuePrototype>> prototypes;
+  if (!context.options().prototypes.empty()) prototypes = readPrototypes(context.options().prototypes);
+  const Configuration& configuration = context.configuration();
+  TissueClassificationParameters parameters;
+  parameters.k = configuration.classificationK;
+  parameters.saturationMm = configuration.classificationSaturationMm;
+  parameters.biasCorrection = configuration.classificationBiasCorrection;
+  parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
+  const TissueClassificationResult result = classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"),
+                                                            *rigid, prototypes, parameters);
+  writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
+  // Recorded for the next scan of the same case (intraoperative scanner frame).
+  writePrototypes(result.prototypes, context.output("classification_prototypes.json"));
+  nlohmann::json perClass = nlohmann::json::object();
+  std::size_t total = 0;
+  for (const auto& [label, count] : result.prototypesPerClass) {
+    perClass[tissueName(label)] = count;
+    total += count;
+  }
+  const double seconds = clock.seconds();
+  context.report().setStage("classify", {{"wall_seconds", seconds},
+                                         {"voxels", result.voxels},
+                                         {"prototypes", total},
+                                         {"prototypes_per_class", perClass},
+                                         {"prototypes_given", prototypes.has_value()},
+                                         {"k", parameters.k},
+                                         {"tumour_resected", result.tumourResected},
+                                         {"feature_seconds", result.featureSeconds},
+                                         {"knn_seconds", result.knnSeconds},
+                                         {"knn_queries", result.knnQueries},
+                                         {"cleanup_seconds", result.cleanupSeconds}});
+  context.report().addWarnings(result.warnings);
+  std::printf("  classify: %zu voxels, %zu prototypes, k-NN %.2f s, %.2f s%s\n", result.voxels, total, result.knnSeconds,
+              seconds, result.tumourResected ? ", tumour resected" : "");
 }
 
 } // namespace brainshift::cli

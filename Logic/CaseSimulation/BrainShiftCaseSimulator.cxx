@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <map>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -469,8 +470,9 @@ SimulatedCase simulateCase(const CaseParameters& P)
   const double csfMean = classSum[0] / classCount[0], greyMean = classSum[1] / classCount[1],
                whiteMean = classSum[2] / classCount[2];
 
-  // -- Ventricles: dark, deep (12 mm inside the brain), near the centre, opened by 1.5 mm so that
-  //    thin sheets of sulcal CSF (the interhemispheric fissure) drop out, in components of 1 ml or more.
+  // -- Ventricles: the ventricular system is the thick dark CSF (opened by 1.5 mm, so that thin
+  //    sulcal CSF drops out) at least 4 mm inside the brain that connects to a seed: dark CSF at
+  //    least 12 mm deep within 40 mm of the brain's centre, in pieces of 1 ml or more.
   ScalarImage::Pointer brainDistance = signedDistance(brainMask);
   const float* brainDepth = brainDistance->GetBufferPointer();
   Vec3 brainCentroid{0, 0, 0};
@@ -484,9 +486,10 @@ SimulatedCase simulateCase(const CaseParameters& P)
   brainCentroid = (1.0 / brainCount) * brainCentroid;
   auto ventricleMask = newImage<MaskImage>(G, 0);
   const double csfThreshold = 0.5 * (csfMean + greyMean);
+  std::vector<unsigned char> darkDeep(N);
   for (std::size_t i = 0; i < N; ++i) {
-    ventricleMask->GetBufferPointer()[i] = brain[i] && brainDepth[i] <= -12.0f && intensity[i] < csfThreshold &&
-                                           norm(G.pointOf(i) - brainCentroid) < 40.0;
+    darkDeep[i] = brain[i] && brainDepth[i] <= -4.0f && intensity[i] < csfThreshold;
+    ventricleMask->GetBufferPointer()[i] = darkDeep[i];
   }
   {
     const double radius = 1.5;
@@ -499,12 +502,24 @@ SimulatedCase simulateCase(const CaseParameters& P)
     }
     auto components = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
     components->SetInput(ventricleMask);
-    auto relabel = itk::RelabelComponentImageFilter<itk::Image<unsigned, 3>, itk::Image<unsigned, 3>>::New();
-    relabel->SetInput(components->GetOutput());
-    relabel->SetMinimumObjectSize(std::max<itk::SizeValueType>(1, itk::SizeValueType(1.0 / voxelMl)));
-    relabel->Update();
-    const unsigned* component = relabel->GetOutput()->GetBufferPointer();
-    for (std::size_t i = 0; i < N; ++i) ventricleMask->GetBufferPointer()[i] = component[i] >= 1 && component[i] <= 4;
+    components->Update();
+    const unsigned* component = components->GetOutput()->GetBufferPointer();
+    std::map<unsigned, std::size_t> seedVoxels, size;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (!component[i]) continue;
+      size[component[i]] += 1;
+      if (brainDepth[i] <= -12.0f && norm(G.pointOf(i) - brainCentroid) < 40.0) seedVoxels[component[i]] += 1;
+    }
+    const double minimumVoxels = 1.0 / voxelMl;
+    for (std::size_t i = 0; i < N; ++i) {
+      const unsigned c = component[i];
+      ventricleMask->GetBufferPointer()[i] = c && double(seedVoxels[c]) * voxelMl >= 0.2 && double(size[c]) >= minimumVoxels;
+    }
+    // Give back what the opening trimmed: the dark CSF within 2 mm of the ventricles kept.
+    ScalarImage::Pointer toVentricles = signedDistance(ventricleMask);
+    for (std::size_t i = 0; i < N; ++i) {
+      ventricleMask->GetBufferPointer()[i] = darkDeep[i] && toVentricles->GetBufferPointer()[i] <= 2.0f;
+    }
   }
   const unsigned char* ventricles = ventricleMask->GetBufferPointer();
 

@@ -42,7 +42,7 @@ Configuration Configuration::load(const fs::path& path)
   }
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
-  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks"}, file);
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "classification"}, file);
   if (document.contains("materials")) {
     const json& materials = document["materials"];
     if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
@@ -87,6 +87,20 @@ Configuration Configuration::load(const fs::path& path)
       configuration.solverOptions = solver["options"].get<std::string>();
     }
   }
+  if (document.contains("classification")) {
+    const json& c = document["classification"];
+    if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
+    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction"}, file + ": classification");
+    if (c.contains("k")) {
+      if (!c["k"].is_number_integer() || c["k"].get<int>() < 1) throw InputError(file + ": classification.k must be a whole number >= 1");
+      configuration.classificationK = c["k"].get<unsigned>();
+    }
+    if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
+    if (c.contains("bias_correction")) {
+      if (!c["bias_correction"].is_boolean()) throw InputError(file + ": classification.bias_correction must be true or false");
+      configuration.classificationBiasCorrection = c["bias_correction"].get<bool>();
+    }
+  }
   if (document.contains("ranks")) {
     if (!document["ranks"].is_number_integer()) throw InputError(file + ": ranks must be a whole number");
     configuration.ranks = document["ranks"].get<int>();
@@ -114,6 +128,12 @@ void Configuration::validate(const std::string& source) const
   if (meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
   for (int label : meshLabels) {
     if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
+  }
+  if (classificationK < 1 || classificationK > 101) {
+    throw InputError(source + ": classification k " + std::to_string(classificationK) + " is outside 1 to 101");
+  }
+  if (!std::isfinite(classificationSaturationMm) || classificationSaturationMm <= 0 || classificationSaturationMm > 100) {
+    throw InputError(source + ": classification saturation " + std::to_string(classificationSaturationMm) + " mm is outside 0 to 100 mm");
   }
   if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
 }

@@ -21,6 +21,10 @@ struct Configuration {
   std::vector<int> meshLabels{2, 3, 4};
   std::string solverOptions; ///< PETSc options over the tuned default
   int ranks = 1;
+  /// Tissue classification: k of the k-NN, saturation of the spatial channels, N4 on or off.
+  unsigned classificationK = 7;
+  double classificationSaturationMm = 10.0;
+  bool classificationBiasCorrection = false;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.5), a non-positive modulus, and the like.

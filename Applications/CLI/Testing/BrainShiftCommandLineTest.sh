@@ -212,6 +212,32 @@ RigidStage)
     --intraop-image "$out/inputs/zeros.nii.gz" --output-dir "$out/zeros"
   ;;
 
+ClassifyStage)
+  out=$work/classify-stage
+  rm -rf "$out"
+  L=$case_dir/preop_labels.nii.gz I=$case_dir/intraop_image.nii.gz
+  expect 2 "run \`brainshift rigid\` on this output folder first" -- "$brainshift" classify --preop-labels "$L" \
+    --intraop-image "$I" --output-dir "$out"
+  "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$L" --intraop-image "$I" \
+    --output-dir "$out" >/dev/null || fail "rigid exited $?"
+  "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out" >/dev/null || fail "classify exited $?"
+  for f in intraop_labels.nii.gz classification_prototypes.json; do [ -s "$out/$f" ] || fail "classify did not write $f"; done
+  for key in wall_seconds voxels prototypes knn_seconds tumour_resected; do
+    json_value "$out/report.json" "['stages']['classify']['$key']" >/dev/null || fail "report.json lacks classify.$key"
+  done
+  [ "$(json_value "$out/report.json" "['stages']['rigid']['trustworthy']")" = "True" ] || fail "the rigid entry was lost"
+  # The next scan reuses the recorded prototypes: on the same scan, the same labels.
+  mkdir -p "$out/again" && cp "$out/rigid_intraop_to_preop.tfm" "$out/again/"
+  "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" \
+    --prototypes "$out/classification_prototypes.json" >/dev/null || fail "classify with recorded prototypes exited $?"
+  cmp -s "$out/intraop_labels.nii.gz" "$out/again/intraop_labels.nii.gz" || fail "recorded prototypes gave other labels"
+  [ "$(json_value "$out/again/report.json" "['stages']['classify']['prototypes_given']")" = "True" ] || fail "not recorded as given"
+  printf '{"frame": "intraop", "prototypes": [{"name": "p", "label": 2, "position": [9999, 0, 0]}]}' > "$out/far.json"
+  expect 2 "'p'" -- "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" --prototypes "$out/far.json"
+  printf '{"classification": {"k": 0}}' > "$out/k0.json"
+  expect 2 "classification.k" -- "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" --config "$out/k0.json"
+  ;;
+
 DemoEndToEnd)
   for f in report.json evaluation.json case/case.json case/scene.mrml case/landmarks.csv case/preop_image.nii.gz \
     case/preop_labels.nii.gz case/preop_fmri.nii.gz case/intraop_image.nii.gz case/truth/intraop_labels.nii.gz \
@@ -225,6 +251,9 @@ DemoEndToEnd)
   grep -q "not available yet" "$demo/report.json" || fail "the demo report does not name the missing stages"
   [ -s "$demo/rigid_intraop_to_preop.tfm" ] || fail "the demo's register did not run the rigid stage"
   float_check "$demo/evaluation.json" "['transforms']['brainshift_rigid']['groups']['head']['max_mm']" "< 0.6"
+  [ -s "$demo/intraop_labels.nii.gz" ] || fail "the demo's register did not run the classify stage"
+  float_check "$demo/evaluation.json" "['classification']['brain_dice']" ">= 0.95"
+  float_check "$demo/evaluation.json" "['classification']['brain_surface_distance_mm']" "<= 1.0"
   ;;
 
 *)

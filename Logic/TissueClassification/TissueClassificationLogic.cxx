@@ -1,0 +1,786 @@
+#include "TissueClassificationLogic.h"
+
+#include "AtomicFile.h"
+#include "MarkupsIO.h"
+
+#include <itkBSplineControlPointImageFilter.h>
+#include <itkBinShrinkImageFilter.h>
+#include <itkConnectedComponentImageFilter.h>
+#include <itkN4BiasFieldCorrectionImageFilter.h>
+#include <itkRelabelComponentImageFilter.h>
+#include <itkShrinkImageFilter.h>
+#include <itkSignedMaurerDistanceMapImageFilter.h>
+
+#include <nanoflann.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <set>
+#include <sstream>
+#include <thread>
+
+namespace brainshift {
+namespace fs = std::filesystem;
+
+namespace {
+
+using MaskImage = itk::Image<unsigned char, 3>;
+using Clock = std::chrono::steady_clock;
+enum : LabelPixel { Background = 0, Head = 1, Parenchyma = 2, Ventricles = 3, Tumour = 4 };
+
+double secondsSince(Clock::time_point start)
+{
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// Runs body(begin, end) over [0, count) on the machine's cores, in contiguous chunks.
+void parallelRanges(std::size_t count, const std::function<void(std::size_t, std::size_t, unsigned)>& body)
+{
+  const unsigned threads = std::max(1u, std::min(8u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> workers;
+  for (unsigned t = 0; t < threads; ++t) {
+    const std::size_t begin = count * t / threads, end = count * (t + 1) / threads;
+    workers.emplace_back([&, begin, end, t] { body(begin, end, t); });
+  }
+  for (auto& w : workers) w.join();
+}
+
+/// The index -> physical mapping of a grid as one affine map: p = origin + M * index.
+struct GridMap {
+  double origin[3];
+  double m[3][3];
+  template <class TImage>
+  explicit GridMap(const TImage& image)
+  {
+    for (int r = 0; r < 3; ++r) {
+      origin[r] = image.GetOrigin()[r];
+      for (int c = 0; c < 3; ++c) m[r][c] = image.GetDirection()(r, c) * image.GetSpacing()[c];
+    }
+  }
+};
+
+/// Signed distance (mm, negative inside) to one tissue of the preoperative labels, on a grid of
+/// about 2 mm, sampled by continuous index.
+struct TissueDistance {
+  LabelPixel label;
+  ScalarImage::Pointer distance;
+  double deepestMm = 0; ///< how deep the tissue's interior goes (positive)
+};
+
+class DistanceSampler {
+public:
+  explicit DistanceSampler(const ScalarImage& image)
+    : image_(image)
+    , size_(image.GetLargestPossibleRegion().GetSize())
+    , data_(image.GetBufferPointer())
+  {
+    // physical -> continuous index: inverse of origin + D * S * index.
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) inverse_[r][c] = image.GetDirection()(c, r) / image.GetSpacing()[r];
+      origin_[r] = image.GetOrigin()[r];
+    }
+  }
+  /// Trilinear; beyond the grid, the value at the nearest border voxel.
+  float operator()(const double p[3]) const
+  {
+    double c[3];
+    for (int r = 0; r < 3; ++r) {
+      c[r] = inverse_[r][0] * (p[0] - origin_[0]) + inverse_[r][1] * (p[1] - origin_[1]) + inverse_[r][2] * (p[2] - origin_[2]);
+      c[r] = std::clamp(c[r], 0.0, double(size_[r] - 1));
+    }
+    std::size_t b[3];
+    double f[3];
+    for (int r = 0; r < 3; ++r) {
+      b[r] = std::min<std::size_t>(std::size_t(c[r]), size_[r] >= 2 ? size_[r] - 2 : 0);
+      f[r] = size_[r] >= 2 ? c[r] - double(b[r]) : 0.0;
+    }
+    double v = 0;
+    for (int corner = 0; corner < 8; ++corner) {
+      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+      if ((dx && size_[0] < 2) || (dy && size_[1] < 2) || (dz && size_[2] < 2)) continue;
+      const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+      v += w * data_[(b[0] + dx) + size_[0] * ((b[1] + dy) + size_[1] * (b[2] + dz))];
+    }
+    return float(v);
+  }
+
+private:
+  const ScalarImage& image_;
+  ScalarImage::SizeType size_;
+  const float* data_;
+  double inverse_[3][3], origin_[3];
+};
+
+std::vector<TissueDistance> tissueDistances(const LabelImage& labels, const std::vector<LabelPixel>& tissues)
+{
+  // One pass: the fraction of each tissue in bins of about 2 mm.
+  const auto size = labels.GetLargestPossibleRegion().GetSize();
+  unsigned factor[3];
+  ScalarImage::SizeType coarseSize;
+  ScalarImage::SpacingType coarseSpacing;
+  for (int i = 0; i < 3; ++i) {
+    factor[i] = std::max(1u, unsigned(std::lround(2.0 / labels.GetSpacing()[i])));
+    coarseSize[i] = (size[i] + factor[i] - 1) / factor[i];
+    coarseSpacing[i] = labels.GetSpacing()[i] * factor[i];
+  }
+  itk::ContinuousIndex<double, 3> firstBinCentre;
+  for (int i = 0; i < 3; ++i) firstBinCentre[i] = 0.5 * (factor[i] - 1);
+  ScalarImage::PointType coarseOrigin;
+  labels.TransformContinuousIndexToPhysicalPoint(firstBinCentre, coarseOrigin);
+  const std::size_t coarseCount = coarseSize[0] * coarseSize[1] * coarseSize[2];
+  std::vector<std::vector<float>> fraction(tissues.size(), std::vector<float>(coarseCount, 0.f));
+  std::vector<float> binVoxels(coarseCount, 0.f);
+  std::map<LabelPixel, std::size_t> slot;
+  for (std::size_t t = 0; t < tissues.size(); ++t) slot[tissues[t]] = t;
+  const LabelPixel* l = labels.GetBufferPointer();
+  for (std::size_t k = 0; k < size[2]; ++k) {
+    for (std::size_t j = 0; j < size[1]; ++j) {
+      for (std::size_t i = 0; i < size[0]; ++i) {
+        const std::size_t bin = i / factor[0] + coarseSize[0] * (j / factor[1] + coarseSize[1] * (k / factor[2]));
+        binVoxels[bin] += 1;
+        auto s = slot.find(l[i + size[0] * (j + size[1] * k)]);
+        if (s != slot.end()) fraction[s->second][bin] += 1;
+      }
+    }
+  }
+  std::vector<TissueDistance> result;
+  for (std::size_t t = 0; t < tissues.size(); ++t) {
+    auto mask = MaskImage::New();
+    MaskImage::RegionType region;
+    region.SetSize(coarseSize);
+    mask->SetRegions(region);
+    mask->SetSpacing(coarseSpacing);
+    mask->SetOrigin(coarseOrigin);
+    mask->SetDirection(labels.GetDirection());
+    mask->Allocate();
+    bool any = false;
+    for (std::size_t b = 0; b < coarseCount; ++b) {
+      mask->GetBufferPointer()[b] = fraction[t][b] >= 0.5f * binVoxels[b];
+      any = any || mask->GetBufferPointer()[b];
+    }
+    if (!any) { // a thin tissue below half of every bin: keep the bins that hold the most of it
+      float best = 0;
+      for (std::size_t b = 0; b < coarseCount; ++b) best = std::max(best, fraction[t][b] / binVoxels[b]);
+      for (std::size_t b = 0; b < coarseCount; ++b) mask->GetBufferPointer()[b] = best > 0 && fraction[t][b] / binVoxels[b] >= 0.5f * best;
+    }
+    auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
+    distance->SetInput(mask);
+    distance->SetUseImageSpacing(true);
+    distance->SetSquaredDistance(false);
+    distance->SetInsideIsPositive(false);
+    distance->Update();
+    TissueDistance td{tissues[t], distance->GetOutput(), 0.0};
+    td.distance->DisconnectPipeline();
+    const float* d = td.distance->GetBufferPointer();
+    td.deepestMm = -double(*std::min_element(d, d + coarseCount));
+    result.push_back(td);
+  }
+  return result;
+}
+
+/// The intensity as one channel: 0 to 100 between the 1st and 99th percentile of the head.
+std::vector<float> normalizedIntensity(const ScalarImage& image, const std::vector<unsigned char>& head)
+{
+  const float* v = image.GetBufferPointer();
+  const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
+  std::vector<float> values;
+  values.reserve(n / 4);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (head[i]) values.push_back(v[i]);
+  }
+  if (values.size() < 100) throw InputError("the intraoperative image shows no head where the aligned labels put it");
+  auto percentile = [&](double q) {
+    const std::size_t at = std::size_t(q * double(values.size() - 1));
+    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(at), values.end());
+    return values[at];
+  };
+  const double lo = percentile(0.01), hi = percentile(0.99);
+  std::vector<float> normalized(n);
+  const double scale = hi > lo ? 100.0 / (hi - lo) : 1.0;
+  for (std::size_t i = 0; i < n; ++i) normalized[i] = float((v[i] - lo) * scale);
+  return normalized;
+}
+
+ScalarImage::Pointer biasCorrected(const ScalarImage& image, const std::vector<unsigned char>& head)
+{
+  // N4 on a 4x shrunk image, the field then evaluated at full resolution.
+  auto mask = MaskImage::New();
+  mask->CopyInformation(&image);
+  mask->SetRegions(image.GetLargestPossibleRegion());
+  mask->Allocate();
+  std::copy(head.begin(), head.end(), mask->GetBufferPointer());
+  auto shrinkImage = itk::ShrinkImageFilter<ScalarImage, ScalarImage>::New();
+  auto shrinkMask = itk::ShrinkImageFilter<MaskImage, MaskImage>::New();
+  shrinkImage->SetInput(&image);
+  shrinkMask->SetInput(mask);
+  for (unsigned i = 0; i < 3; ++i) {
+    const unsigned f = std::max(1u, unsigned(std::lround(4.0 / image.GetSpacing()[i])));
+    shrinkImage->SetShrinkFactor(i, f);
+    shrinkMask->SetShrinkFactor(i, f);
+  }
+  using N4 = itk::N4BiasFieldCorrectionImageFilter<ScalarImage, MaskImage, ScalarImage>;
+  auto n4 = N4::New();
+  n4->SetInput(shrinkImage->GetOutput());
+  n4->SetMaskImage(shrinkMask->GetOutput());
+  n4->SetMaskLabel(1);
+  N4::VariableSizeArrayType iterations(3);
+  iterations.Fill(30);
+  n4->SetMaximumNumberOfIterations(iterations);
+  n4->SetNumberOfFittingLevels(3);
+  n4->Update();
+  // Evaluate the fitted B-spline log field on the full grid.
+  using LogField = itk::Image<N4::BiasFieldControlPointLatticeType::PixelType, 3>;
+  auto reconstructer = itk::BSplineControlPointImageFilter<N4::BiasFieldControlPointLatticeType, LogField>::New();
+  reconstructer->SetInput(n4->GetLogBiasFieldControlPointLattice());
+  reconstructer->SetSplineOrder(n4->GetSplineOrder());
+  reconstructer->SetSize(image.GetLargestPossibleRegion().GetSize());
+  reconstructer->SetOrigin(image.GetOrigin());
+  reconstructer->SetSpacing(image.GetSpacing());
+  reconstructer->SetDirection(image.GetDirection());
+  reconstructer->Update();
+  auto corrected = ScalarImage::New();
+  corrected->CopyInformation(&image);
+  corrected->SetRegions(image.GetLargestPossibleRegion());
+  corrected->Allocate();
+  const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
+  const auto* logField = reconstructer->GetOutput()->GetBufferPointer();
+  for (std::size_t i = 0; i < n; ++i) corrected->GetBufferPointer()[i] = image.GetBufferPointer()[i] / std::exp(logField[i][0]);
+  return corrected;
+}
+
+struct PrototypeCloud {
+  std::vector<float> features;
+  std::size_t dims = 0;
+  std::size_t kdtree_get_point_count() const { return dims ? features.size() / dims : 0; }
+  float kdtree_get_pt(std::size_t index, std::size_t dim) const { return features[index * dims + dim]; }
+  template <class BoundingBox>
+  bool kdtree_get_bbox(BoundingBox&) const { return false; }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PrototypeCloud>, PrototypeCloud, -1, std::size_t>;
+
+/// Voxels with bit-identical features (most of the image: deep inside a tissue every distance is
+/// 0 or saturated) share one k-NN answer. An open-addressing table per thread, keyed by the
+/// feature bits, stores the voxel that was answered and its label.
+class AnswerCache {
+public:
+  AnswerCache(const float* features, std::size_t dims)
+    : features_(features), dims_(dims), slots_(std::size_t(1) << 20)
+  {
+  }
+  /// The label of a voxel with the same features as `voxel`, or -1.
+  int find(std::size_t voxel, std::uint64_t hash) const
+  {
+    for (std::size_t s = hash & mask(), probes = 0; probes < 64; s = (s + 1) & mask(), ++probes) {
+      const Slot& slot = slots_[s];
+      if (slot.label < 0) return -1;
+      if (slot.hash == hash && std::memcmp(features_ + slot.voxel * dims_, features_ + voxel * dims_, dims_ * sizeof(float)) == 0) {
+        return slot.label;
+      }
+    }
+    return -1;
+  }
+  void insert(std::size_t voxel, std::uint64_t hash, LabelPixel label)
+  {
+    if (4 * (used_ + 1) > 3 * slots_.size()) return; // full enough: answer the rest directly
+    for (std::size_t s = hash & mask();; s = (s + 1) & mask()) {
+      if (slots_[s].label < 0) {
+        slots_[s] = {hash, voxel, int(label)};
+        ++used_;
+        return;
+      }
+    }
+  }
+  static std::uint64_t hashOf(const float* f, std::size_t dims)
+  {
+    std::uint64_t h = 1469598103934665603ull; // FNV-1a over the bits
+    for (std::size_t d = 0; d < dims; ++d) {
+      std::uint32_t bits;
+      std::memcpy(&bits, f + d, sizeof(bits));
+      h = (h ^ bits) * 1099511628211ull;
+    }
+    return h ^ (h >> 29);
+  }
+
+private:
+  struct Slot {
+    std::uint64_t hash = 0;
+    std::size_t voxel = 0;
+    int label = -1;
+  };
+  std::size_t mask() const { return slots_.size() - 1; }
+  const float* features_;
+  std::size_t dims_;
+  std::vector<Slot> slots_;
+  std::size_t used_ = 0;
+};
+
+double median(std::vector<float> v)
+{
+  if (v.empty()) return std::nan("");
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+/// Signed distance on the intraoperative grid (mm, negative inside).
+ScalarImage::Pointer signedDistance(const MaskImage* mask)
+{
+  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
+  distance->SetInput(mask);
+  distance->SetUseImageSpacing(true);
+  distance->SetSquaredDistance(false);
+  distance->SetInsideIsPositive(false);
+  distance->Update();
+  ScalarImage::Pointer out = distance->GetOutput();
+  out->DisconnectPipeline();
+  return out;
+}
+
+template <class TLabel>
+itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySize)
+{
+  auto cc = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
+  cc->SetInput(mask);
+  cc->SetFullyConnected(false);
+  if (!sortBySize) {
+    cc->Update();
+    return cc->GetOutput();
+  }
+  auto relabel = itk::RelabelComponentImageFilter<itk::Image<unsigned, 3>, itk::Image<unsigned, 3>>::New();
+  relabel->SetInput(cc->GetOutput());
+  relabel->Update();
+  return relabel->GetOutput();
+}
+
+} // namespace
+
+std::string tissueName(LabelPixel label)
+{
+  switch (label) {
+  case Background: return "background";
+  case Head: return "head";
+  case Parenchyma: return "parenchyma";
+  case Ventricles: return "ventricles";
+  case Tumour: return "tumour";
+  default: return std::to_string(label);
+  }
+}
+
+void TissueClassificationParameters::validate() const
+{
+  if (k == 0 || k > 101) throw InputError("classification: k = " + std::to_string(k) + " is outside 1 to 101");
+  if (!(saturationMm > 0 && saturationMm <= 100)) throw InputError("classification: saturation distance must be within 0 to 100 mm");
+  if (!(intensityWeight >= 0) || !(spatialWeight >= 0) || intensityWeight + spatialWeight == 0) {
+    throw InputError("classification: channel weights must be non-negative and not both zero");
+  }
+  if (prototypesPerClass < k) {
+    throw InputError("classification: " + std::to_string(prototypesPerClass) + " prototypes per class is fewer than k = " + std::to_string(k));
+  }
+  if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0)) {
+    throw InputError("classification: erosion, opening and hole size must be non-negative");
+  }
+}
+
+TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
+                                           const SpatialTransform& rigid,
+                                           const std::optional<std::vector<TissuePrototype>>& given,
+                                           const TissueClassificationParameters& P)
+{
+  P.validate();
+  TissueClassificationResult result;
+  const auto start = Clock::now();
+  const auto size = intraop.GetLargestPossibleRegion().GetSize();
+  const std::size_t N = intraop.GetLargestPossibleRegion().GetNumberOfPixels();
+  result.voxels = N;
+
+  // The tissues of the preoperative labels, and their distance maps.
+  std::set<LabelPixel> present;
+  {
+    const LabelPixel* l = preopLabels.GetBufferPointer();
+    for (std::size_t i = 0, n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) present.insert(l[i]);
+  }
+  for (LabelPixel required : {Background, Parenchyma}) {
+    if (!present.count(required)) {
+      throw InputError("classification: the preoperative labels have no " + tissueName(required) + " (label " +
+                       std::to_string(required) + ")");
+    }
+  }
+  const std::vector<LabelPixel> tissues(present.begin(), present.end());
+  const std::vector<TissueDistance> distances = tissueDistances(preopLabels, tissues);
+  std::vector<DistanceSampler> samplers;
+  for (const auto& d : distances) samplers.emplace_back(*d.distance);
+  const std::size_t T = tissues.size();
+  const std::size_t D = 1 + T; // intensity, then one distance per tissue
+
+  // Where each intraoperative voxel lands in the preoperative frame: x = A (origin + M index) + t.
+  const AffineParameters rigidParameters = affineParametersOf(&rigid);
+  const GridMap grid(intraop);
+  double A[3][3], b[3];
+  for (int r = 0; r < 3; ++r) {
+    b[r] = rigidParameters.translation[r];
+    for (int c = 0; c < 3; ++c) {
+      A[r][c] = 0;
+      for (int k = 0; k < 3; ++k) A[r][c] += rigidParameters.matrix[r][k] * grid.m[k][c];
+      b[r] += rigidParameters.matrix[r][c] * grid.origin[c];
+    }
+  }
+  auto preopPointOf = [&](std::size_t offset, double x[3]) {
+    const double i = double(offset % size[0]), j = double((offset / size[0]) % size[1]), k = double(offset / (size[0] * size[1]));
+    for (int r = 0; r < 3; ++r) x[r] = b[r] + A[r][0] * i + A[r][1] * j + A[r][2] * k;
+  };
+
+  // Signed distances on the intraoperative grid (saturated), and the head (not background).
+  std::vector<float> signedDistances(N * T);
+  std::vector<unsigned char> head(N);
+  const std::size_t backgroundSlot = 0; // tissues are sorted; 0 is background
+  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned) {
+    double x[3];
+    for (std::size_t i = begin; i < end; ++i) {
+      preopPointOf(i, x);
+      for (std::size_t t = 0; t < T; ++t) {
+        signedDistances[i * T + t] = std::clamp(samplers[t](x), float(-P.saturationMm), float(P.saturationMm));
+      }
+      head[i] = signedDistances[i * T + backgroundSlot] > 0.0f;
+    }
+  });
+  ScalarImage::Pointer corrected;
+  const ScalarImage* source = &intraop;
+  if (P.biasCorrection) {
+    corrected = biasCorrected(intraop, head);
+    source = corrected;
+  }
+  const std::vector<float> intensity = normalizedIntensity(*source, head);
+  std::vector<float> features(N * D);
+  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned) {
+    for (std::size_t i = begin; i < end; ++i) {
+      features[i * D] = float(P.intensityWeight) * intensity[i];
+      for (std::size_t t = 0; t < T; ++t) {
+        features[i * D + 1 + t] = float(P.spatialWeight) * std::max(0.0f, signedDistances[i * T + t]);
+      }
+    }
+  });
+
+  // Prototypes.
+  auto slotOf = [&](LabelPixel label) -> std::size_t {
+    return std::size_t(std::find(tissues.begin(), tissues.end(), label) - tissues.begin());
+  };
+  std::vector<std::size_t> prototypeVoxels;
+  std::vector<LabelPixel> prototypeLabels;
+  if (given) {
+    std::map<LabelPixel, unsigned> counts;
+    for (const TissuePrototype& p : *given) {
+      itk::Index<3> index;
+      if (!intraop.TransformPhysicalPointToIndex(p.position, index)) {
+        std::ostringstream message;
+        message << "classification: prototype '" << p.name << "' at (" << p.position[0] << ", " << p.position[1] << ", "
+                << p.position[2] << ") is outside the intraoperative image";
+        throw InputError(message.str());
+      }
+      if (!present.count(p.label)) {
+        throw InputError("classification: prototype '" + p.name + "' is " + tissueName(p.label) +
+                         ", a label the preoperative labels do not have");
+      }
+      prototypeVoxels.push_back(index[0] + size[0] * (index[1] + size[1] * index[2]));
+      prototypeLabels.push_back(p.label);
+      counts[p.label] += 1;
+      result.prototypes.push_back(p);
+    }
+    for (LabelPixel label : tissues) {
+      if (counts[label] < P.k) {
+        throw InputError("classification: " + std::to_string(counts[label]) + " prototypes of " + tissueName(label) +
+                         " (label " + std::to_string(label) + "); k = " + std::to_string(P.k) + " needs at least as many");
+      }
+    }
+  } else {
+    std::mt19937_64 rng(P.seed);
+    for (std::size_t t = 0; t < T; ++t) {
+      // Inside the aligned tissue by the erosion (or half its depth for thin tissues); on coarse
+      // grids, less deep until there are enough candidates.
+      std::vector<std::size_t> candidates;
+      for (double erosion = std::min(P.prototypeErosionMm, 0.5 * distances[t].deepestMm);; erosion *= 0.5) {
+        if (erosion < 0.25) erosion = 0.0;
+        candidates.clear();
+        for (std::size_t i = 0; i < N; ++i) {
+          if (signedDistances[i * T + t] <= -erosion && (erosion > 0 || signedDistances[i * T + t] < 0)) candidates.push_back(i);
+        }
+        if (candidates.size() >= 2 * P.prototypesPerClass || erosion == 0.0) break;
+      }
+      if (candidates.size() < 3 * std::size_t(P.k)) {
+        // A tissue thinner than the intraoperative voxels: its most interior voxels, up to 1 mm out.
+        candidates.clear();
+        std::vector<std::pair<float, std::size_t>> nearest;
+        for (std::size_t i = 0; i < N; ++i) {
+          if (signedDistances[i * T + t] < 1.0f) nearest.emplace_back(signedDistances[i * T + t], i);
+        }
+        const std::size_t want = std::min<std::size_t>(nearest.size(), 4 * std::size_t(P.k));
+        std::partial_sort(nearest.begin(), nearest.begin() + std::ptrdiff_t(want), nearest.end());
+        for (std::size_t n = 0; n < want; ++n) candidates.push_back(nearest[n].second);
+        result.warnings.push_back("classify: " + tissueName(tissues[t]) + " is thinner than the intraoperative voxels; " +
+                                  std::to_string(candidates.size()) + " prototypes from its most interior voxels");
+      }
+      std::shuffle(candidates.begin(), candidates.end(), rng);
+      candidates.resize(std::min<std::size_t>(candidates.size(), 4 * P.prototypesPerClass));
+      // What the rigid prior cannot know (tissue that moved) shows as intensity outliers.
+      std::vector<float> values;
+      for (std::size_t i : candidates) values.push_back(intensity[i]);
+      const double m = median(values);
+      std::vector<float> deviations;
+      for (float v : values) deviations.push_back(float(std::abs(v - m)));
+      const double spread = std::max(1.0, 1.4826 * median(deviations));
+      unsigned kept = 0;
+      for (std::size_t i : candidates) {
+        if (kept == P.prototypesPerClass) break;
+        if (std::abs(intensity[i] - m) > 3.0 * spread) continue;
+        prototypeVoxels.push_back(i);
+        prototypeLabels.push_back(tissues[t]);
+        ++kept;
+      }
+      if (kept < P.k) {
+        throw InputError("classification: only " + std::to_string(kept) + " prototypes of " + tissueName(tissues[t]) +
+                         " could be chosen (the tissue is too small after aligning); k = " + std::to_string(P.k));
+      }
+    }
+    for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) {
+      const std::size_t i = prototypeVoxels[p];
+      itk::Index<3> index{{itk::IndexValueType(i % size[0]), itk::IndexValueType((i / size[0]) % size[1]),
+                           itk::IndexValueType(i / (size[0] * size[1]))}};
+      TissuePrototype prototype;
+      prototype.label = prototypeLabels[p];
+      prototype.name = tissueName(prototype.label) + "-" + std::to_string(p + 1);
+      intraop.TransformIndexToPhysicalPoint(index, prototype.position);
+      result.prototypes.push_back(prototype);
+    }
+  }
+
+  // A tumour whose prototypes look like the ventricles' fluid rather than the parenchyma has been
+  // resected: its class is dropped, and where it was, fluid is decided by the clean-up.
+  std::map<LabelPixel, std::vector<float>> prototypeIntensity;
+  for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) prototypeIntensity[prototypeLabels[p]].push_back(intensity[prototypeVoxels[p]]);
+  const double parenchymaMedian = median(prototypeIntensity[Parenchyma]);
+  const double fluidMedian = present.count(Ventricles) ? median(prototypeIntensity[Ventricles]) : std::nan("");
+  if (present.count(Tumour) && present.count(Ventricles)) {
+    const double tumourMedian = median(prototypeIntensity[Tumour]);
+    result.tumourResected = std::abs(tumourMedian - fluidMedian) < std::abs(tumourMedian - parenchymaMedian);
+  }
+  PrototypeCloud cloud;
+  cloud.dims = D;
+  std::vector<LabelPixel> cloudLabels;
+  for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) {
+    if (result.tumourResected && prototypeLabels[p] == Tumour) continue;
+    cloud.features.insert(cloud.features.end(), features.begin() + std::ptrdiff_t(prototypeVoxels[p] * D),
+                          features.begin() + std::ptrdiff_t((prototypeVoxels[p] + 1) * D));
+    cloudLabels.push_back(prototypeLabels[p]);
+    result.prototypesPerClass[prototypeLabels[p]] += 1;
+  }
+  result.featureSeconds = secondsSince(start);
+
+  // Exact k-NN (kd-tree), voxels with bit-identical features answered once.
+  const auto knnStart = Clock::now();
+  KdTree tree(D, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(12));
+  tree.buildIndex();
+  result.labels = LabelImage::New();
+  result.labels->CopyInformation(&intraop);
+  result.labels->SetRegions(intraop.GetLargestPossibleRegion());
+  result.labels->Allocate();
+  LabelPixel* out = result.labels->GetBufferPointer();
+  const unsigned k = P.k;
+  std::vector<std::size_t> queriesPerThread(16, 0);
+  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned thread) {
+    AnswerCache cache(features.data(), D);
+    std::vector<std::size_t> neighbours(k);
+    std::vector<float> squaredDistances(k);
+    std::map<LabelPixel, unsigned> tally;
+    std::size_t queries = 0;
+    for (std::size_t i = begin; i < end; ++i) {
+      const float* f = &features[i * D];
+      const std::uint64_t hash = AnswerCache::hashOf(f, D);
+      const int known = cache.find(i, hash);
+      if (known >= 0) {
+        out[i] = LabelPixel(known);
+        continue;
+      }
+      ++queries;
+      nanoflann::KNNResultSet<float, std::size_t> found(k);
+      found.init(neighbours.data(), squaredDistances.data());
+      tree.findNeighbors(found, f, nanoflann::SearchParams(32, 0.0f, true));
+      // Majority vote; a tie goes to the class of the nearest prototype among the tied.
+      tally.clear();
+      unsigned best = 0;
+      for (std::size_t n = 0; n < found.size(); ++n) best = std::max(best, ++tally[cloudLabels[neighbours[n]]]);
+      LabelPixel chosen = cloudLabels[neighbours[0]];
+      for (std::size_t n = 0; n < found.size(); ++n) {
+        if (tally[cloudLabels[neighbours[n]]] == best) {
+          chosen = cloudLabels[neighbours[n]];
+          break;
+        }
+      }
+      out[i] = chosen;
+      cache.insert(i, hash, chosen);
+    }
+    queriesPerThread[thread] = queries;
+  });
+  for (std::size_t q : queriesPerThread) result.knnQueries += q;
+  result.knnSeconds = secondsSince(knnStart);
+
+  // Clean-up of the brain.
+  const auto cleanupStart = Clock::now();
+  auto isBrain = [](LabelPixel l) { return l == Parenchyma || l == Ventricles || l == Tumour; };
+  if (present.count(Ventricles)) {
+    // Thick fluid in the brain: ventricles where the aligned ventricles are, else a gap or cavity.
+    const double fluidThreshold = 0.5 * (fluidMedian + parenchymaMedian);
+    auto fluid = MaskImage::New();
+    fluid->CopyInformation(&intraop);
+    fluid->SetRegions(intraop.GetLargestPossibleRegion());
+    fluid->Allocate();
+    // A tumour that is still there is tissue, however dark its core.
+    const bool tumourPresent = present.count(Tumour) && !result.tumourResected;
+    for (std::size_t i = 0; i < N; ++i) {
+      fluid->GetBufferPointer()[i] = isBrain(out[i]) && intensity[i] < fluidThreshold && !(tumourPresent && out[i] == Tumour);
+    }
+    ScalarImage::Pointer toFluid = signedDistance(fluid);
+    auto core = MaskImage::New();
+    core->CopyInformation(fluid);
+    core->SetRegions(fluid->GetLargestPossibleRegion());
+    core->Allocate();
+    for (std::size_t i = 0; i < N; ++i) core->GetBufferPointer()[i] = toFluid->GetBufferPointer()[i] <= -P.fluidOpeningMm;
+    ScalarImage::Pointer toCore = signedDistance(core);
+    auto thick = MaskImage::New();
+    thick->CopyInformation(fluid);
+    thick->SetRegions(fluid->GetLargestPossibleRegion());
+    thick->Allocate();
+    for (std::size_t i = 0; i < N; ++i) {
+      thick->GetBufferPointer()[i] = fluid->GetBufferPointer()[i] && toCore->GetBufferPointer()[i] <= P.fluidOpeningMm + 1e-3;
+    }
+    auto labelled = components<unsigned>(thick, false);
+    const unsigned* component = labelled->GetBufferPointer();
+    std::map<unsigned, std::pair<std::size_t, std::size_t>> overlap; // component -> (in ventricles, all)
+    const std::size_t ventricleSlot = slotOf(Ventricles);
+    for (std::size_t i = 0; i < N; ++i) {
+      if (!component[i]) continue;
+      auto& o = overlap[component[i]];
+      o.second += 1;
+      o.first += signedDistances[i * T + ventricleSlot] <= 2.0f;
+    }
+    for (std::size_t i = 0; i < N; ++i) {
+      if (component[i]) {
+        const auto& o = overlap[component[i]];
+        out[i] = double(o.first) >= 0.3 * double(o.second) ? Ventricles : Background;
+      } else if (out[i] == Ventricles && signedDistances[i * T + ventricleSlot] > 0.5f * float(P.saturationMm)) {
+        out[i] = Parenchyma; // thin fluid far from the ventricles: a sulcus, part of the parenchyma
+      }
+    }
+  }
+  if (result.tumourResected) {
+    for (std::size_t i = 0; i < N; ++i) {
+      if (out[i] == Tumour) out[i] = Background;
+    }
+  }
+  // The brain is one piece; small holes in it are filled, the cavity and the gap are not.
+  auto brain = MaskImage::New();
+  brain->CopyInformation(&intraop);
+  brain->SetRegions(intraop.GetLargestPossibleRegion());
+  brain->Allocate();
+  for (std::size_t i = 0; i < N; ++i) brain->GetBufferPointer()[i] = isBrain(out[i]);
+  {
+    auto largest = components<unsigned>(brain, true);
+    for (std::size_t i = 0; i < N; ++i) {
+      if (isBrain(out[i]) && largest->GetBufferPointer()[i] != 1) {
+        out[i] = Head;
+        brain->GetBufferPointer()[i] = 0;
+      }
+    }
+  }
+  {
+    auto outside = MaskImage::New();
+    outside->CopyInformation(brain);
+    outside->SetRegions(brain->GetLargestPossibleRegion());
+    outside->Allocate();
+    for (std::size_t i = 0; i < N; ++i) outside->GetBufferPointer()[i] = !brain->GetBufferPointer()[i];
+    auto holes = components<unsigned>(outside, false);
+    const unsigned* h = holes->GetBufferPointer();
+    std::map<unsigned, std::size_t> volume;
+    std::set<unsigned> touchesBorder;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (!h[i]) continue;
+      volume[h[i]] += 1;
+      const std::size_t x = i % size[0], y = (i / size[0]) % size[1], z = i / (size[0] * size[1]);
+      if (x == 0 || y == 0 || z == 0 || x + 1 == size[0] || y + 1 == size[1] || z + 1 == size[2]) touchesBorder.insert(h[i]);
+    }
+    const double voxelMl = intraop.GetSpacing()[0] * intraop.GetSpacing()[1] * intraop.GetSpacing()[2] / 1000.0;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (h[i] && !touchesBorder.count(h[i]) && double(volume[h[i]]) * voxelMl < P.smallHoleMl) out[i] = Parenchyma;
+    }
+  }
+  result.cleanupSeconds = secondsSince(cleanupStart);
+  if (result.tumourResected) {
+    result.warnings.push_back("classify: the tumour's prototypes look like fluid: treated as resected");
+  }
+  return result;
+}
+
+// ---- Prototype files --------------------------------------------------------------------------
+namespace {
+LabelPixel labelFromName(const std::string& name, const fs::path& path)
+{
+  const std::string head = name.substr(0, name.find('-'));
+  for (LabelPixel l = 0; l <= 4; ++l) {
+    if (head == tissueName(l) || (head == "tumor" && l == Tumour)) return l;
+  }
+  try {
+    std::size_t used = 0;
+    const int value = std::stoi(head, &used);
+    if (used == head.size() && value >= 0 && value <= 65535) return LabelPixel(value);
+  } catch (const std::exception&) {
+  }
+  throw InputError(path.string() + ": prototype '" + name +
+                   "' names no tissue (start the name with a label number or background, head, parenchyma, ventricles, tumour)");
+}
+} // namespace
+
+std::vector<TissuePrototype> readPrototypes(const fs::path& path)
+{
+  const std::string name = path.filename().string();
+  if (name.size() > 9 && name.substr(name.size() - 9) == ".mrk.json") {
+    std::vector<TissuePrototype> prototypes;
+    for (const NamedPoint& point : readMarkupsJson(path)) {
+      prototypes.push_back({point.name, labelFromName(point.name, path), point.position});
+    }
+    return prototypes;
+  }
+  nlohmann::json document;
+  try {
+    document = nlohmann::json::parse(readTextFile(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(path.string() + ": not a prototype file: " + e.what());
+  }
+  if (!document.is_object() || document.value("frame", "") != "intraop" || !document.contains("prototypes")) {
+    throw InputError(path.string() + ": not a prototype file (expected {\"frame\": \"intraop\", \"prototypes\": [...]})");
+  }
+  std::vector<TissuePrototype> prototypes;
+  for (const auto& p : document["prototypes"]) {
+    TissuePrototype prototype;
+    prototype.name = p.value("name", "");
+    if (!p.contains("label") || !p["label"].is_number_integer() || !p.contains("position") || p["position"].size() != 3) {
+      throw InputError(path.string() + ": prototype '" + prototype.name + "' needs an integer label and a 3D position");
+    }
+    prototype.label = LabelPixel(p["label"].get<int>());
+    for (int i = 0; i < 3; ++i) prototype.position[i] = p["position"][i].get<double>();
+    prototypes.push_back(prototype);
+  }
+  return prototypes;
+}
+
+void writePrototypes(const std::vector<TissuePrototype>& prototypes, const fs::path& path)
+{
+  nlohmann::json list = nlohmann::json::array();
+  for (const TissuePrototype& p : prototypes) {
+    list.push_back({{"name", p.name}, {"label", p.label}, {"position", {p.position[0], p.position[1], p.position[2]}}});
+  }
+  const nlohmann::json document = {{"frame", "intraop"}, {"coordinate_system", "LPS"}, {"prototypes", list}};
+  writeTextFileAtomically(path, document.dump(1) + "\n");
+}
+
+} // namespace brainshift

@@ -1,0 +1,73 @@
+#pragma once
+// Intraoperative tissue classification (Warfield et al. 2000): k-nearest-neighbour classification
+// of a multichannel feature, the intraoperative intensity together with an explicit spatial model
+// of each tissue: the saturated distance to that tissue in the preoperative label map, brought onto
+// the intraoperative grid through the rigid transform. Prototype voxels are chosen once, their
+// positions (intraoperative scanner frame, LPS) recorded, and re-sampled on every later scan.
+//
+// What the rigid prior cannot know, the intensity decides and a clean-up settles: thick fluid
+// (the gap under the craniotomy, the resection cavity) is outside the brain unless it is where the
+// ventricles are; a tumour whose prototypes look like fluid has been resected.
+#include "BrainShiftErrors.h"
+#include "ImageTypes.h"
+#include "TransformIO.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+/// A prototype voxel: a named position (intraoperative LPS) known to show one tissue.
+struct TissuePrototype {
+  std::string name;
+  LabelPixel label = 0;
+  PhysicalPoint position;
+};
+
+struct TissueClassificationParameters {
+  unsigned k = 7;
+  double saturationMm = 10.0;          ///< spatial channels: distance to each tissue, capped here
+  double intensityWeight = 1.0;        ///< intensity channel, scaled to 0..100 over the head
+  double spatialWeight = 1.0;          ///< per mm of distance
+  unsigned prototypesPerClass = 150;   ///< automatic choice
+  double prototypeErosionMm = 3.0;     ///< automatic choice: this far inside the (aligned) tissue
+  bool biasCorrection = false;         ///< N4 under a head mask before the intensity is used
+  double fluidOpeningMm = 2.0;         ///< fluid thicker than this is a gap or a cavity, not a sulcus
+  double smallHoleMl = 0.5;            ///< holes in the brain smaller than this are filled
+  std::uint64_t seed = 2000;
+  void validate() const;
+};
+
+struct TissueClassificationResult {
+  LabelImage::Pointer labels;                ///< on the intraoperative grid, the contract's labels
+  std::vector<TissuePrototype> prototypes;   ///< the ones used (record them for the next scan)
+  std::map<LabelPixel, unsigned> prototypesPerClass;
+  bool tumourResected = false;               ///< the tumour's prototypes look like fluid
+  double featureSeconds = 0, knnSeconds = 0, cleanupSeconds = 0;
+  std::size_t voxels = 0;
+  std::size_t knnQueries = 0;                ///< voxels that needed a tree query (the rest shared an answer)
+  Warnings warnings;
+};
+
+/// Classifies `intraop`. `rigidIntraopToPreop` aligns `preopLabels` with it. Prototypes: when
+/// `given` is set they are used (and checked: inside the image, known labels, enough per class,
+/// k not above any class's count), else they are chosen from the aligned labels' interiors.
+TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
+                                           const SpatialTransform& rigidIntraopToPreop,
+                                           const std::optional<std::vector<TissuePrototype>>& given,
+                                           const TissueClassificationParameters& parameters);
+
+/// Prototype files: JSON {"frame": "intraop", "prototypes": [{"name", "label", "position"}]},
+/// or a 3D Slicer .mrk.json whose point names start with the label ("2", "2-07") or tissue name
+/// ("parenchyma-07", "ventricles", "tumour-1", "head", "background"). LPS.
+std::vector<TissuePrototype> readPrototypes(const std::filesystem::path& path);
+void writePrototypes(const std::vector<TissuePrototype>& prototypes, const std::filesystem::path& path);
+
+/// "background", "head", "parenchyma", "ventricles", "tumour", or the number.
+std::string tissueName(LabelPixel label);
+
+} // namespace brainshift
