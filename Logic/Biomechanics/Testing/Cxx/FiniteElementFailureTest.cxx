@@ -1,0 +1,69 @@
+// What goes wrong is said, and the caller survives: bad jobs, a missing worker, a solver that does
+// not converge, a worker that hangs (timeout) or is cancelled.
+#include "BrainShiftErrors.h"
+#include "BrainShiftTestingSupport.h"
+#include "FiniteElementTestSupport.h"
+
+#include <chrono>
+#include <thread>
+
+int FiniteElementFailureTest(int, char*[])
+{
+  return brainshift::testing::runTest("FiniteElementFailureTest", [] {
+    using namespace brainshift;
+    const testing::Field shift = [](const double* x) { return std::array<double, 3>{0.0, 0.0, -0.01 * x[2]}; };
+    FiniteElementJob good = testing::cubeMesh(4, 40.0);
+    testing::imposeOnBoundary(good, 40.0, shift);
+
+    FiniteElementJob job = good;
+    std::swap(job.tetrahedra[1], job.tetrahedra[2]);
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), std::invalid_argument, "tetrahedron 0 is inverted");
+    job = good;
+    job.fixedNodes.clear();
+    job.fixedDisplacements.clear();
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), std::invalid_argument, "singular");
+    job = good;
+    job.fixedNodes[0] = 100000;
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), std::invalid_argument, "boundary node 100000 does not exist");
+    job = good;
+    job.materials[0].poissonRatio = 0.5;
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), std::invalid_argument, "Poisson ratio");
+    job = good;
+    job.materials[0].youngsModulus = std::nan("");
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), std::invalid_argument, "Young's modulus");
+
+    FiniteElementRunOptions missing = testing::workerOptions();
+    missing.worker = "/nonexistent/brainshift-fe-worker";
+    BS_CHECK_THROWS(solveWithWorker(good, missing), MethodError, "missing");
+
+    job = good;
+    job.solverOptions = "-ksp_type cg -pc_type none -ksp_max_it 2 -ksp_rtol 1e-12";
+    BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), MethodError, "did not converge");
+
+    // A worker that hangs: a timeout stops the whole process group, quickly.
+    FiniteElementJob big = testing::cubeMesh(24, 40.0);
+    testing::imposeOnBoundary(big, 40.0, shift);
+    big.solverOptions = "-ksp_type cg -pc_type none -ksp_rtol 1e-300 -ksp_atol 0 -ksp_max_it 100000000";
+    FiniteElementRunOptions impatient = testing::workerOptions(2);
+    impatient.timeoutSeconds = 1.5;
+    const auto start = std::chrono::steady_clock::now();
+    BS_CHECK_THROWS(solveWithWorker(big, impatient), MethodError, "timed out");
+    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    BS_CHECK_MSG(waited < 8.0, waited);
+
+    // Cancelled from another thread.
+    std::atomic<bool> cancel{false};
+    FiniteElementRunOptions cancellable = testing::workerOptions();
+    cancellable.cancel = &cancel;
+    std::thread canceller([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(800));
+      cancel = true;
+    });
+    BS_CHECK_THROWS(solveWithWorker(big, cancellable), MethodError, "cancelled");
+    canceller.join();
+
+    // And the good job still solves afterwards.
+    const FiniteElementResult result = solveWithWorker(good, testing::workerOptions());
+    BS_CHECK(testing::maximumNodalError(good, result, shift) < 1e-6);
+  });
+}
