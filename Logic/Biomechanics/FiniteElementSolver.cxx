@@ -3,6 +3,8 @@
 #include "BrainShiftErrors.h"
 
 #include <chrono>
+#include <cmath>
+#include <optional>
 #include <csignal>
 #include <cstring>
 #include <fcntl.h>
@@ -29,6 +31,14 @@ using Clock = std::chrono::steady_clock;
 struct TemporaryFolder {
   fs::path path;
   bool owned = false;
+  TemporaryFolder() = default;
+  TemporaryFolder(TemporaryFolder&& other) noexcept : path(std::move(other.path)), owned(other.owned) { other.owned = false; }
+  TemporaryFolder& operator=(TemporaryFolder&& other) noexcept
+  {
+    std::swap(path, other.path);
+    std::swap(owned, other.owned);
+    return *this;
+  }
   ~TemporaryFolder()
   {
     std::error_code ignored;
@@ -61,14 +71,175 @@ std::string lastLines(const std::string& text, std::size_t count)
 }
 } // namespace
 
-FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteElementRunOptions& options)
+namespace {
+
+/// One run of the worker under mpiexec, in its own process group, with pipes to its standard
+/// input, output and error.
+class WorkerProcess {
+public:
+  WorkerProcess(const FiniteElementRunOptions& options, const std::vector<std::string>& workerArguments)
+    : options_(options)
+  {
+    std::vector<std::string> arguments = {options.mpiexec, "-n", std::to_string(options.ranks)};
+    if (options.allowOversubscription) arguments.push_back("--oversubscribe");
+    if (::geteuid() == 0) arguments.push_back("--allow-run-as-root");
+    if (!options.hostfile.empty()) {
+      arguments.push_back("--hostfile");
+      arguments.push_back(options.hostfile.string());
+    }
+    arguments.push_back(options.worker.string());
+    arguments.insert(arguments.end(), workerArguments.begin(), workerArguments.end());
+    int in[2], out[2], err[2];
+    if (::pipe(in) != 0 || ::pipe(out) != 0 || ::pipe(err) != 0) {
+      throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
+    }
+    child_ = ::fork();
+    if (child_ < 0) throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
+    if (child_ == 0) {
+      ::setpgid(0, 0); // its own process group: every rank can be stopped together
+      ::dup2(in[0], STDIN_FILENO);
+      ::dup2(out[1], STDOUT_FILENO);
+      ::dup2(err[1], STDERR_FILENO);
+      ::close(in[1]);
+      ::close(out[0]);
+      ::close(err[0]);
+      std::vector<char*> argv;
+      for (auto& a : arguments) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      ::execvp(argv[0], argv.data());
+      std::fprintf(stderr, "cannot run %s: %s\n", argv[0], std::strerror(errno));
+      ::_exit(127);
+    }
+    ::setpgid(child_, child_);
+    ::close(in[0]);
+    ::close(out[1]);
+    ::close(err[1]);
+    input_ = in[1];
+    output_ = out[0];
+    error_ = err[0];
+    ::fcntl(output_, F_SETFL, O_NONBLOCK);
+    ::fcntl(error_, F_SETFL, O_NONBLOCK);
+    ::signal(SIGPIPE, SIG_IGN); // a dead worker shows as a failed write, not a dead caller
+  }
+
+  ~WorkerProcess()
+  {
+    if (!exited_) stop("");
+    ::kill(-child_, SIGKILL); // no orphaned ranks, even after a normal exit
+    ::close(input_);
+    ::close(output_);
+    ::close(error_);
+  }
+
+  void writeLine(const std::string& line)
+  {
+    const std::string text = line + "\n";
+    if (::write(input_, text.data(), text.size()) != ssize_t(text.size())) {
+      throw MethodError("the finite element worker is gone" + stderrSummary());
+    }
+  }
+
+  /// The next line of output that is not progress; empty when the worker exited. Progress lines
+  /// go to the callback. Timeout and cancellation stop the worker with a MethodError.
+  std::optional<std::string> readLine(double timeoutSeconds)
+  {
+    const auto start = Clock::now();
+    for (;;) {
+      for (std::size_t newline; (newline = stdout_.find('\n')) != std::string::npos;) {
+        const std::string line = stdout_.substr(0, newline);
+        stdout_.erase(0, newline + 1);
+        std::istringstream fields(line);
+        std::string word, stage;
+        double fraction = 0;
+        if (fields >> word >> stage >> fraction && word == "progress") {
+          if (options_.progress) options_.progress(stage, fraction);
+          continue;
+        }
+        return line;
+      }
+      if (exited_) return std::nullopt;
+      pollfd fds[2] = {{output_, POLLIN, 0}, {error_, POLLIN, 0}};
+      ::poll(fds, 2, 50);
+      drain();
+      if (stdout_.find('\n') != std::string::npos) continue;
+      if (::waitpid(child_, &status_, WNOHANG) == child_) {
+        exited_ = true;
+        drain();
+        continue;
+      }
+      if (options_.cancel && options_.cancel->load()) stop("cancelled");
+      if (std::chrono::duration<double>(Clock::now() - start).count() > timeoutSeconds) {
+        std::ostringstream why;
+        why << "timed out after " << timeoutSeconds << " s";
+        stop(why.str());
+      }
+    }
+  }
+
+  /// MethodError unless the worker exited normally.
+  void requireCleanExit()
+  {
+    if (!exited_) return;
+    if (WIFSIGNALED(status_)) {
+      throw MethodError("the finite element worker died (signal " + std::to_string(WTERMSIG(status_)) + ")" + stderrSummary());
+    }
+    if (!WIFEXITED(status_) || WEXITSTATUS(status_) != 0) {
+      throw MethodError("the finite element worker failed (exit " + std::to_string(WEXITSTATUS(status_)) + ")" + stderrSummary());
+    }
+  }
+
+  bool exited() const { return exited_; }
+
+private:
+  void drain()
+  {
+    char buffer[4096];
+    for (ssize_t got; (got = ::read(output_, buffer, sizeof(buffer))) > 0;) stdout_.append(buffer, std::size_t(got));
+    for (ssize_t got; (got = ::read(error_, buffer, sizeof(buffer))) > 0;) stderr_.append(buffer, std::size_t(got));
+  }
+
+  std::string stderrSummary() const
+  {
+    const std::string message = lastLines(stderr_, 3);
+    return message.empty() ? "" : ": " + message;
+  }
+
+  /// Terminates the group, waits the grace period, kills what is left; MethodError with `why`.
+  void stop(const std::string& why)
+  {
+    ::kill(-child_, SIGTERM);
+    const auto deadline = Clock::now() + std::chrono::duration<double>(options_.cancelGraceSeconds);
+    while (!exited_ && Clock::now() < deadline) {
+      if (::waitpid(child_, &status_, WNOHANG) == child_) exited_ = true;
+      else std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ::kill(-child_, SIGKILL);
+    if (!exited_) {
+      ::waitpid(child_, &status_, 0);
+      exited_ = true;
+    }
+    if (!why.empty()) throw MethodError("the finite element worker was stopped: " + why);
+  }
+
+  const FiniteElementRunOptions& options_;
+  pid_t child_ = -1;
+  int input_ = -1, output_ = -1, error_ = -1;
+  int status_ = 0;
+  bool exited_ = false;
+  std::string stdout_, stderr_;
+};
+
+void requireWorker(const FiniteElementRunOptions& options)
 {
-  job.validate();
   if (options.ranks < 1) throw std::invalid_argument("the worker needs at least one rank");
   std::error_code ec;
   if (!fs::is_regular_file(options.worker, ec) || ::access(options.worker.c_str(), X_OK) != 0) {
     throw MethodError("the finite element worker " + options.worker.string() + " is missing or not executable");
   }
+}
+
+TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
+{
   TemporaryFolder folder;
   if (options.workFolder.empty()) {
     char pattern[] = "/tmp/brainshift-fe-XXXXXX";
@@ -79,113 +250,100 @@ FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteEle
     folder.path = options.workFolder;
     fs::create_directories(folder.path);
   }
+  return folder;
+}
+
+} // namespace
+
+FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteElementRunOptions& options)
+{
+  job.validate();
+  requireWorker(options);
+  TemporaryFolder folder = workFolderFor(options);
   const fs::path jobFile = folder.path / "job.bsfe", resultFile = folder.path / "result.bsfe";
+  std::error_code ec;
   fs::remove(resultFile, ec);
   writeFiniteElementJob(job, jobFile);
-
-  std::vector<std::string> arguments = {options.mpiexec, "-n", std::to_string(options.ranks)};
-  if (options.allowOversubscription) arguments.push_back("--oversubscribe");
-  if (::geteuid() == 0) arguments.push_back("--allow-run-as-root");
-  if (!options.hostfile.empty()) {
-    arguments.push_back("--hostfile");
-    arguments.push_back(options.hostfile.string());
-  }
-  arguments.push_back(options.worker.string());
-  arguments.push_back(jobFile.string());
-  arguments.push_back(resultFile.string());
-
-  int out[2], err[2];
-  if (::pipe(out) != 0 || ::pipe(err) != 0) throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
-  const pid_t child = ::fork();
-  if (child < 0) throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
-  if (child == 0) {
-    ::setpgid(0, 0); // its own process group: every rank can be stopped together
-    ::dup2(out[1], STDOUT_FILENO);
-    ::dup2(err[1], STDERR_FILENO);
-    ::close(out[0]);
-    ::close(err[0]);
-    std::vector<char*> argv;
-    for (auto& a : arguments) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    ::execvp(argv[0], argv.data());
-    std::fprintf(stderr, "cannot run %s: %s\n", argv[0], std::strerror(errno));
-    ::_exit(127);
-  }
-  ::setpgid(child, child);
-  ::close(out[1]);
-  ::close(err[1]);
-  ::fcntl(out[0], F_SETFL, O_NONBLOCK);
-  ::fcntl(err[0], F_SETFL, O_NONBLOCK);
-
-  std::string stdoutBuffer, stderrText;
+  WorkerProcess worker(options, {jobFile.string(), resultFile.string()});
   const auto start = Clock::now();
-  std::string stopReason;
-  int status = 0;
-  bool exited = false;
-  auto drain = [&](int fd, std::string& into) {
-    char buffer[4096];
-    for (ssize_t got; (got = ::read(fd, buffer, sizeof(buffer))) > 0;) into.append(buffer, std::size_t(got));
-  };
-  auto stopGroup = [&](const std::string& why) {
-    stopReason = why;
-    ::kill(-child, SIGTERM);
-    const auto deadline = Clock::now() + std::chrono::duration<double>(options.cancelGraceSeconds);
-    while (Clock::now() < deadline) {
-      if (::waitpid(child, &status, WNOHANG) == child) {
-        exited = true;
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    ::kill(-child, SIGKILL); // whatever is left of the group, ranks included
-    if (!exited) {
-      ::waitpid(child, &status, 0);
-      exited = true;
-    }
-  };
-  while (!exited) {
-    pollfd fds[2] = {{out[0], POLLIN, 0}, {err[0], POLLIN, 0}};
-    ::poll(fds, 2, 50);
-    drain(out[0], stdoutBuffer);
-    drain(err[0], stderrText);
-    for (std::size_t newline; (newline = stdoutBuffer.find('\n')) != std::string::npos;) {
-      const std::string line = stdoutBuffer.substr(0, newline);
-      stdoutBuffer.erase(0, newline + 1);
-      std::istringstream fields(line);
-      std::string word, stage;
-      double fraction = 0;
-      if (fields >> word >> stage >> fraction && word == "progress" && options.progress) options.progress(stage, fraction);
-    }
-    if (::waitpid(child, &status, WNOHANG) == child) {
-      exited = true;
-      break;
-    }
-    if (options.cancel && options.cancel->load()) stopGroup("cancelled");
-    else if (std::chrono::duration<double>(Clock::now() - start).count() > options.timeoutSeconds) {
-      std::ostringstream why;
-      why << "timed out after " << options.timeoutSeconds << " s";
-      stopGroup(why.str());
-    }
+  while (worker.readLine(options.timeoutSeconds - std::chrono::duration<double>(Clock::now() - start).count())) {
   }
-  drain(err[0], stderrText);
-  ::close(out[0]);
-  ::close(err[0]);
-  ::kill(-child, SIGKILL); // no orphaned ranks, even after a normal exit
-  if (!stopReason.empty()) throw MethodError("the finite element worker was stopped: " + stopReason);
-  if (WIFSIGNALED(status)) {
-    throw MethodError("the finite element worker died (signal " + std::to_string(WTERMSIG(status)) + ")" +
-                      (stderrText.empty() ? "" : ": " + lastLines(stderrText, 3)));
-  }
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    const std::string message = lastLines(stderrText, 3);
-    throw MethodError("the finite element worker failed (exit " + std::to_string(WEXITSTATUS(status)) + ")" +
-                      (message.empty() ? "" : ": " + message));
-  }
+  worker.requireCleanExit();
   try {
     return readFiniteElementResult(resultFile);
   } catch (const std::exception& e) {
     throw MethodError(std::string("the finite element worker wrote no usable result: ") + e.what());
   }
+}
+
+struct FiniteElementSession::Impl {
+  FiniteElementRunOptions options;
+  FiniteElementJob fixedPart; ///< the fixed nodes (values replaced per solve)
+  TemporaryFolder folder;
+  std::unique_ptr<WorkerProcess> worker;
+  int solves = 0;
+};
+
+FiniteElementSession::FiniteElementSession(const FiniteElementJob& job, FiniteElementRunOptions options)
+  : impl_(std::make_unique<Impl>())
+{
+  job.validate();
+  requireWorker(options);
+  const auto start = Clock::now();
+  impl_->options = std::move(options);
+  impl_->folder = workFolderFor(impl_->options);
+  const fs::path jobFile = impl_->folder.path / "job.bsfe";
+  writeFiniteElementJob(job, jobFile);
+  impl_->fixedPart.fixedNodes = job.fixedNodes;
+  impl_->worker = std::make_unique<WorkerProcess>(impl_->options, std::vector<std::string>{"--serve", jobFile.string()});
+  const auto answer = impl_->worker->readLine(impl_->options.timeoutSeconds);
+  if (!answer || *answer != "ready") {
+    impl_->worker->requireCleanExit();
+    throw MethodError("the finite element worker did not get ready" + (answer ? ": " + *answer : std::string()));
+  }
+  prepareSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+FiniteElementSession::~FiniteElementSession()
+{
+  if (impl_ && impl_->worker && !impl_->worker->exited()) {
+    try {
+      impl_->worker->writeLine("quit");
+      impl_->worker->readLine(impl_->options.cancelGraceSeconds);
+    } catch (const std::exception&) {
+    }
+  }
+}
+
+FiniteElementResult FiniteElementSession::solve(const std::vector<double>& fixedDisplacements)
+{
+  if (fixedDisplacements.size() != 3 * impl_->fixedPart.fixedNodes.size()) {
+    throw std::invalid_argument("a solve needs 3 values per fixed node (" + std::to_string(3 * impl_->fixedPart.fixedNodes.size()) +
+                                "), not " + std::to_string(fixedDisplacements.size()));
+  }
+  for (double d : fixedDisplacements) {
+    if (!std::isfinite(d)) throw std::invalid_argument("a boundary displacement is not finite");
+  }
+  if (impl_->worker->exited()) throw MethodError("the finite element worker has stopped; prepare a new session");
+  const int n = ++impl_->solves;
+  const fs::path valuesFile = impl_->folder.path / ("values-" + std::to_string(n) + ".bsfe");
+  const fs::path resultFile = impl_->folder.path / ("result-" + std::to_string(n) + ".bsfe");
+  FiniteElementJob values = impl_->fixedPart;
+  values.fixedDisplacements = fixedDisplacements;
+  writeFiniteElementJob(values, valuesFile);
+  impl_->worker->writeLine("solve " + valuesFile.string() + " " + resultFile.string());
+  const auto answer = impl_->worker->readLine(impl_->options.timeoutSeconds);
+  if (!answer) {
+    impl_->worker->requireCleanExit();
+    throw MethodError("the finite element worker stopped during a solve");
+  }
+  if (answer->rfind("failed", 0) == 0) throw MethodError("the finite element solve failed: " + answer->substr(std::min<std::size_t>(7, answer->size())));
+  if (*answer != "solved") throw MethodError("the finite element worker answered '" + *answer + "'");
+  FiniteElementResult result = readFiniteElementResult(resultFile);
+  std::error_code ec;
+  fs::remove(valuesFile, ec);
+  fs::remove(resultFile, ec);
+  return result;
 }
 
 } // namespace brainshift

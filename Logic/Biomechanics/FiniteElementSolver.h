@@ -8,6 +8,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 
 namespace brainshift {
@@ -31,6 +32,29 @@ struct FiniteElementRunOptions {
 /// Solves. std::invalid_argument for a job that fails validate(); MethodError when the worker is
 /// missing, dies, times out, is cancelled, or its solver does not converge (with its message).
 FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteElementRunOptions& options);
+
+/// A worker that stays up between scans: the mesh and the boundary nodes are known before surgery,
+/// only the imposed values arrive during it. The constructor prepares (partition, assembly,
+/// elimination, preconditioner setup: the worker's `--serve` mode); each solve() answers a new set
+/// of values for the same fixed nodes, reusing all of it. The worker is stopped on destruction.
+class FiniteElementSession {
+public:
+  FiniteElementSession(const FiniteElementJob& job, FiniteElementRunOptions options);
+  ~FiniteElementSession();
+  FiniteElementSession(const FiniteElementSession&) = delete;
+  FiniteElementSession& operator=(const FiniteElementSession&) = delete;
+
+  /// Wall seconds of the preparation as the caller saw it (process start included).
+  double prepareSeconds() const { return prepareSeconds_; }
+  /// One solve; `fixedDisplacements` has 3 values per fixed node of the job, in its order.
+  /// MethodError when the solve fails (the session stays usable) or the worker has died.
+  FiniteElementResult solve(const std::vector<double>& fixedDisplacements);
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  double prepareSeconds_ = 0;
+};
 
 /// The worker beside the running executable (for the command line and the host).
 std::filesystem::path workerBesideExecutable();

@@ -1,5 +1,7 @@
 // brainshift-fe-worker JOB RESULT: solves a linear elastic problem on linear tetrahedra with
 // imposed displacements (FiniteElementJob.h) in parallel with PETSc, as an MPI program.
+// brainshift-fe-worker --serve JOB: prepares the same problem (before surgery) and then answers
+// new imposed values for the same boundary nodes from standard input (during surgery).
 //
 // Every rank reads the job. The node graph is partitioned (PETSc's MatPartitioning, PT-Scotch when
 // there are several ranks; nodes weighted by the tetrahedra around them, which is the assembly
@@ -138,214 +140,271 @@ Numbering partitionNodes(const FiniteElementJob& job, int rank, int size)
   return numbering;
 }
 
-FiniteElementResult solve(const FiniteElementJob& job, int rank, int size)
-{
-  FiniteElementResult result;
-  result.ranks = size;
-  const PetscInt n = PetscInt(job.nodeCount());
-  result.equations = 3 * std::int64_t(n);
-  double clock = MPI_Wtime();
-
-  // -- Partition and renumber.
-  progress(rank, "partition", 0.0);
-  const Numbering numbering = partitionNodes(job, rank, size);
-  result.partitioner = numbering.partitioner;
-  const PetscInt first = numbering.firstOwned, owned = numbering.ownedCount;
-  auto mine = [&](PetscInt newNode) { return newNode >= first && newNode < first + owned; };
-
-  // -- Preallocation (block rows of 3) and the tetrahedra this rank assembles.
-  std::vector<std::vector<PetscInt>> blockNeighbours(static_cast<std::size_t>(owned));
-  std::vector<std::size_t> myTetrahedra;
-  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
-    PetscInt v[4];
-    for (int k = 0; k < 4; ++k) v[k] = numbering.newOfOld[std::size_t(job.tetrahedra[4 * t + k])];
-    if (mine(v[0])) myTetrahedra.push_back(t);
-    for (int a = 0; a < 4; ++a) {
-      if (!mine(v[a])) continue;
-      for (int b = 0; b < 4; ++b) blockNeighbours[std::size_t(v[a] - first)].push_back(v[b]);
-    }
-  }
-  std::vector<PetscInt> diagonalBlocks(static_cast<std::size_t>(owned)), offDiagonalBlocks(static_cast<std::size_t>(owned));
-  for (PetscInt i = 0; i < owned; ++i) {
-    auto& list = blockNeighbours[std::size_t(i)];
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
-    for (PetscInt c : list) (mine(c) ? diagonalBlocks : offDiagonalBlocks)[std::size_t(i)] += 1;
-    if (list.empty()) diagonalBlocks[std::size_t(i)] = 1; // a node in no tetrahedron (kept solvable)
-    std::vector<PetscInt>().swap(list);
-  }
-  Mat A;
-  check(MatCreate(PETSC_COMM_WORLD, &A), "MatCreate");
-  check(MatSetSizes(A, 3 * owned, 3 * owned, 3 * n, 3 * n), "MatSetSizes");
-  check(MatSetBlockSize(A, 3), "MatSetBlockSize");
-  check(MatSetType(A, MATAIJ), "MatSetType");
-  check(MatSetOptionsPrefix(A, "elasticity_"), "MatSetOptionsPrefix");
-  check(MatSetFromOptions(A), "MatSetFromOptions");
-  check(MatXAIJSetPreallocation(A, 3, diagonalBlocks.data(), offDiagonalBlocks.data(), nullptr, nullptr), "MatXAIJSetPreallocation");
-  check(MatSetOption(A, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE), "MatSetOption");
-
-  // -- Assembly.
-  progress(rank, "assembly", 0.0);
-  for (std::size_t e = 0; e < myTetrahedra.size(); ++e) {
-    const std::size_t t = myTetrahedra[e];
-    double p[4][3];
-    PetscInt blocks[4];
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t old = std::size_t(job.tetrahedra[4 * t + k]);
-      for (int d = 0; d < 3; ++d) p[k][d] = job.nodes[3 * old + d];
-      blocks[k] = numbering.newOfOld[old];
-    }
-    double K[144];
-    tetrahedronStiffness(p, job.materials[std::size_t(job.materialOfTetrahedron[t])], K);
-    check(MatSetValuesBlocked(A, 4, blocks, 4, blocks, K, ADD_VALUES), "MatSetValuesBlocked");
-  }
-  // Nodes in no tetrahedron: an identity block keeps the matrix regular.
-  for (PetscInt i = 0; i < owned; ++i) {
-    if (offDiagonalBlocks[std::size_t(i)] == 0 && diagonalBlocks[std::size_t(i)] == 1) {
-      const PetscInt row = first + i;
-      const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-      check(MatSetValuesBlocked(A, 1, &row, 1, &row, identity, ADD_VALUES), "MatSetValuesBlocked");
-    }
-  }
-  check(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
-  check(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+/// The prepared problem: partitioned, assembled, fixed dofs eliminated, solver set up. Only the
+/// imposed values change between solves (one right-hand side each), so a served worker keeps it.
+class PreparedProblem {
+public:
+  PreparedProblem(const FiniteElementJob& job, int rank, int size, bool keepAssembled)
+    : job_(job), rank_(rank), size_(size)
   {
-    std::int64_t mineCount = std::int64_t(myTetrahedra.size());
-    result.tetrahedraPerRank.resize(std::size_t(size));
-    MPI_Allgather(&mineCount, 1, MPI_INT64_T, result.tetrahedraPerRank.data(), 1, MPI_INT64_T, PETSC_COMM_WORLD);
-  }
+    result_.ranks = size;
+    const PetscInt n = PetscInt(job.nodeCount());
+    n_ = n;
+    result_.equations = 3 * std::int64_t(n);
+    double clock = MPI_Wtime();
 
-  // -- Boundary conditions: eliminate the fixed dofs, keeping A symmetric.
-  Vec x, b;
-  check(MatCreateVecs(A, &x, &b), "MatCreateVecs");
-  check(VecSet(b, 0.0), "VecSet");
-  check(VecSet(x, 0.0), "VecSet");
-  std::vector<PetscInt> fixedRows;
-  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-    const PetscInt node = numbering.newOfOld[std::size_t(job.fixedNodes[f])];
-    if (!mine(node)) continue;
-    for (int d = 0; d < 3; ++d) {
-      const PetscInt row = 3 * node + d;
-      fixedRows.push_back(row);
-      check(VecSetValue(x, row, job.fixedDisplacements[3 * f + std::size_t(d)], INSERT_VALUES), "VecSetValue");
+    // -- Partition and renumber.
+    progress(rank, "partition", 0.0);
+    numbering_ = partitionNodes(job, rank, size);
+    result_.partitioner = numbering_.partitioner;
+    first_ = numbering_.firstOwned;
+    owned_ = numbering_.ownedCount;
+
+    // -- Preallocation (block rows of 3) and the tetrahedra this rank assembles.
+    std::vector<std::vector<PetscInt>> blockNeighbours(static_cast<std::size_t>(owned_));
+    std::vector<std::size_t> myTetrahedra;
+    for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
+      PetscInt v[4];
+      for (int k = 0; k < 4; ++k) v[k] = numbering_.newOfOld[std::size_t(job.tetrahedra[4 * t + k])];
+      if (mine(v[0])) myTetrahedra.push_back(t);
+      for (int a = 0; a < 4; ++a) {
+        if (!mine(v[a])) continue;
+        for (int b = 0; b < 4; ++b) blockNeighbours[std::size_t(v[a] - first_)].push_back(v[b]);
+      }
     }
-  }
-  check(VecAssemblyBegin(x), "VecAssemblyBegin");
-  check(VecAssemblyEnd(x), "VecAssemblyEnd");
-  check(MatZeroRowsColumns(A, PetscInt(fixedRows.size()), fixedRows.data(), 1.0, x, b), "MatZeroRowsColumns");
+    std::vector<PetscInt> diagonalBlocks(static_cast<std::size_t>(owned_)), offDiagonalBlocks(static_cast<std::size_t>(owned_));
+    for (PetscInt i = 0; i < owned_; ++i) {
+      auto& list = blockNeighbours[std::size_t(i)];
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+      for (PetscInt c : list) (mine(c) ? diagonalBlocks : offDiagonalBlocks)[std::size_t(i)] += 1;
+      if (list.empty()) diagonalBlocks[std::size_t(i)] = 1; // a node in no tetrahedron (kept solvable)
+      std::vector<PetscInt>().swap(list);
+    }
+    check(MatCreate(PETSC_COMM_WORLD, &A_), "MatCreate");
+    check(MatSetSizes(A_, 3 * owned_, 3 * owned_, 3 * n, 3 * n), "MatSetSizes");
+    check(MatSetBlockSize(A_, 3), "MatSetBlockSize");
+    check(MatSetType(A_, MATAIJ), "MatSetType");
+    check(MatSetOptionsPrefix(A_, "elasticity_"), "MatSetOptionsPrefix");
+    check(MatSetFromOptions(A_), "MatSetFromOptions");
+    check(MatXAIJSetPreallocation(A_, 3, diagonalBlocks.data(), offDiagonalBlocks.data(), nullptr, nullptr), "MatXAIJSetPreallocation");
+    check(MatSetOption(A_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE), "MatSetOption");
 
-  // Rigid body modes for the multigrid (coordinates in the new numbering).
-  Vec coordinates;
-  check(VecCreateMPI(PETSC_COMM_WORLD, 3 * owned, 3 * n, &coordinates), "VecCreateMPI");
-  check(VecSetBlockSize(coordinates, 3), "VecSetBlockSize");
-  {
-    PetscScalar* c;
-    check(VecGetArray(coordinates, &c), "VecGetArray");
-    for (PetscInt old = 0; old < n; ++old) {
-      const PetscInt node = numbering.newOfOld[std::size_t(old)];
+    // -- Assembly.
+    progress(rank, "assembly", 0.0);
+    for (std::size_t t : myTetrahedra) {
+      double p[4][3];
+      PetscInt blocks[4];
+      for (int k = 0; k < 4; ++k) {
+        const std::size_t old = std::size_t(job.tetrahedra[4 * t + k]);
+        for (int d = 0; d < 3; ++d) p[k][d] = job.nodes[3 * old + d];
+        blocks[k] = numbering_.newOfOld[old];
+      }
+      double K[144];
+      tetrahedronStiffness(p, job.materials[std::size_t(job.materialOfTetrahedron[t])], K);
+      check(MatSetValuesBlocked(A_, 4, blocks, 4, blocks, K, ADD_VALUES), "MatSetValuesBlocked");
+    }
+    for (PetscInt i = 0; i < owned_; ++i) {
+      if (offDiagonalBlocks[std::size_t(i)] == 0 && diagonalBlocks[std::size_t(i)] == 1) {
+        const PetscInt row = first_ + i;
+        const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        check(MatSetValuesBlocked(A_, 1, &row, 1, &row, identity, ADD_VALUES), "MatSetValuesBlocked");
+      }
+    }
+    check(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+    check(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    {
+      std::int64_t mineCount = std::int64_t(myTetrahedra.size());
+      result_.tetrahedraPerRank.resize(std::size_t(size));
+      MPI_Allgather(&mineCount, 1, MPI_INT64_T, result_.tetrahedraPerRank.data(), 1, MPI_INT64_T, PETSC_COMM_WORLD);
+    }
+    // The assembled matrix before elimination gives the right-hand side of each new set of values.
+    check(MatDuplicate(A_, MAT_COPY_VALUES, &assembled_), "MatDuplicate");
+    (void)keepAssembled;
+
+    // -- Eliminate the fixed dofs, keeping A symmetric.
+    for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
+      const PetscInt node = numbering_.newOfOld[std::size_t(job.fixedNodes[f])];
       if (!mine(node)) continue;
-      for (int d = 0; d < 3; ++d) c[3 * (node - first) + d] = job.nodes[3 * std::size_t(old) + std::size_t(d)];
+      for (int d = 0; d < 3; ++d) fixedRows_.push_back({3 * node + d, 3 * f + std::size_t(d)});
     }
-    check(VecRestoreArray(coordinates, &c), "VecRestoreArray");
-  }
-  MatNullSpace rigidBodyModes;
-  check(MatNullSpaceCreateRigidBody(coordinates, &rigidBodyModes), "MatNullSpaceCreateRigidBody");
-  check(MatSetNearNullSpace(A, rigidBodyModes), "MatSetNearNullSpace");
-  result.assemblySeconds = maxOverRanks(MPI_Wtime() - clock);
+    std::vector<PetscInt> rows;
+    for (const auto& r : fixedRows_) rows.push_back(r.first);
+    check(MatZeroRowsColumns(A_, PetscInt(rows.size()), rows.data(), 1.0, nullptr, nullptr), "MatZeroRowsColumns");
 
-  // -- Solver: the tuned default, then the job's options over it.
-  clock = MPI_Wtime();
-  progress(rank, "setup", 0.0);
-  KSP ksp;
-  check(KSPCreate(PETSC_COMM_WORLD, &ksp), "KSPCreate");
-  check(KSPSetOperators(ksp, A, A), "KSPSetOperators");
-  check(KSPSetType(ksp, KSPCG), "KSPSetType");
-  check(KSPSetTolerances(ksp, 1e-8, PETSC_DEFAULT, PETSC_DEFAULT, 5000), "KSPSetTolerances");
-  PC pc;
-  check(KSPGetPC(ksp, &pc), "KSPGetPC");
-  check(PCSetType(pc, PCGAMG), "PCSetType");
-  check(KSPSetFromOptions(ksp), "KSPSetFromOptions");
-  {
-    // x holds the imposed values: a good start for an iterative solver (a direct one takes none).
-    KSPType type;
-    check(KSPGetType(ksp, &type), "KSPGetType");
-    check(KSPSetInitialGuessNonzero(ksp, std::string(type) == KSPPREONLY ? PETSC_FALSE : PETSC_TRUE), "KSPSetInitialGuessNonzero");
-  }
-  check(KSPSetUp(ksp), "KSPSetUp");
-  check(PCSetUp(pc), "PCSetUp");
-  result.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
-  {
+    // Rigid body modes for the multigrid (coordinates in the new numbering).
+    Vec coordinates;
+    check(VecCreateMPI(PETSC_COMM_WORLD, 3 * owned_, 3 * n, &coordinates), "VecCreateMPI");
+    check(VecSetBlockSize(coordinates, 3), "VecSetBlockSize");
+    {
+      PetscScalar* c;
+      check(VecGetArray(coordinates, &c), "VecGetArray");
+      for (PetscInt old = 0; old < n; ++old) {
+        const PetscInt node = numbering_.newOfOld[std::size_t(old)];
+        if (!mine(node)) continue;
+        for (int d = 0; d < 3; ++d) c[3 * (node - first_) + d] = job.nodes[3 * std::size_t(old) + std::size_t(d)];
+      }
+      check(VecRestoreArray(coordinates, &c), "VecRestoreArray");
+    }
+    MatNullSpace rigidBodyModes;
+    check(MatNullSpaceCreateRigidBody(coordinates, &rigidBodyModes), "MatNullSpaceCreateRigidBody");
+    check(MatSetNearNullSpace(A_, rigidBodyModes), "MatSetNearNullSpace");
+    MatNullSpaceDestroy(&rigidBodyModes);
+    VecDestroy(&coordinates);
+    result_.assemblySeconds = maxOverRanks(MPI_Wtime() - clock);
+
+    // -- Solver: the tuned default, then the job's options over it; set up once.
+    clock = MPI_Wtime();
+    progress(rank, "setup", 0.0);
+    check(KSPCreate(PETSC_COMM_WORLD, &ksp_), "KSPCreate");
+    check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
+    check(KSPSetType(ksp_, KSPCG), "KSPSetType");
+    check(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, PETSC_DEFAULT, 5000), "KSPSetTolerances");
+    PC pc;
+    check(KSPGetPC(ksp_, &pc), "KSPGetPC");
+    check(PCSetType(pc, PCGAMG), "PCSetType");
+    check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
     KSPType kspType;
     PCType pcType;
-    KSPGetType(ksp, &kspType);
-    PCGetType(pc, &pcType);
-    result.solver = std::string(kspType) + "+" + pcType;
+    check(KSPGetType(ksp_, &kspType), "KSPGetType");
+    // The imposed values are a good start for an iterative solver (a direct one takes none).
+    check(KSPSetInitialGuessNonzero(ksp_, std::string(kspType) == KSPPREONLY ? PETSC_FALSE : PETSC_TRUE), "KSPSetInitialGuessNonzero");
+    check(KSPSetUp(ksp_), "KSPSetUp");
+    check(PCSetUp(pc), "PCSetUp");
+    check(PCGetType(pc, &pcType), "PCGetType");
+    result_.solver = std::string(kspType) + "+" + pcType;
+    result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
+    check(MatCreateVecs(A_, &x_, &b_), "MatCreateVecs");
   }
 
-  clock = MPI_Wtime();
-  progress(rank, "solve", 0.0);
-  check(KSPSolve(ksp, b, x), "KSPSolve");
-  result.solveSeconds = maxOverRanks(MPI_Wtime() - clock);
-  KSPConvergedReason reason;
-  check(KSPGetConvergedReason(ksp, &reason), "KSPGetConvergedReason");
-  result.convergedReason = int(reason);
-  PetscInt iterations;
-  check(KSPGetIterationNumber(ksp, &iterations), "KSPGetIterationNumber");
-  result.iterations = int(iterations);
+  ~PreparedProblem()
   {
-    // The true relative residual, whatever norm the solver watched.
-    Vec r;
-    check(VecDuplicate(b, &r), "VecDuplicate");
-    check(MatMult(A, x, r), "MatMult");
-    check(VecAYPX(r, -1.0, b), "VecAYPX");
-    PetscReal residual, rhs;
-    check(VecNorm(r, NORM_2, &residual), "VecNorm");
-    check(VecNorm(b, NORM_2, &rhs), "VecNorm");
-    result.relativeResidual = rhs > 0 ? double(residual / rhs) : double(residual);
-    VecDestroy(&r);
-  }
-  if (reason <= 0) {
-    throw WorkerFailure(3, "the solver (" + result.solver + ") did not converge: KSP reason " + std::to_string(int(reason)) +
-                             " after " + std::to_string(result.iterations) + " iterations, relative residual " +
-                             std::to_string(result.relativeResidual));
+    KSPDestroy(&ksp_);
+    VecDestroy(&x_);
+    VecDestroy(&b_);
+    MatDestroy(&assembled_);
+    MatDestroy(&A_);
   }
 
-  // The imposed values exactly (the solver met them only to its tolerance).
-  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-    const PetscInt node = numbering.newOfOld[std::size_t(job.fixedNodes[f])];
-    if (!mine(node)) continue;
-    for (int d = 0; d < 3; ++d) check(VecSetValue(x, 3 * node + d, job.fixedDisplacements[3 * f + std::size_t(d)], INSERT_VALUES), "VecSetValue");
-  }
-  check(VecAssemblyBegin(x), "VecAssemblyBegin");
-  check(VecAssemblyEnd(x), "VecAssemblyEnd");
-
-  // -- The displacements, back in the job's node order, on rank 0.
-  VecScatter toZero;
-  Vec gathered;
-  check(VecScatterCreateToZero(x, &toZero, &gathered), "VecScatterCreateToZero");
-  check(VecScatterBegin(toZero, x, gathered, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
-  check(VecScatterEnd(toZero, x, gathered, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
-  if (rank == 0) {
-    const PetscScalar* g;
-    check(VecGetArrayRead(gathered, &g), "VecGetArrayRead");
-    result.displacements.resize(std::size_t(3 * n));
-    for (PetscInt old = 0; old < n; ++old) {
-      const PetscInt node = numbering.newOfOld[std::size_t(old)];
-      for (int d = 0; d < 3; ++d) result.displacements[std::size_t(3 * old + d)] = double(g[3 * node + d]);
+  /// Solves for one set of imposed values (3 per fixed node, in the job's order).
+  FiniteElementResult solveFor(const std::vector<double>& values)
+  {
+    FiniteElementResult result = result_;
+    const double clock = MPI_Wtime();
+    progress(rank_, "solve", 0.0);
+    // x: the imposed values on the fixed dofs, 0 elsewhere; b = -A0 x, then the values on the fixed rows.
+    check(VecSet(x_, 0.0), "VecSet");
+    for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
+    check(VecAssemblyBegin(x_), "VecAssemblyBegin");
+    check(VecAssemblyEnd(x_), "VecAssemblyEnd");
+    check(MatMult(assembled_, x_, b_), "MatMult");
+    check(VecScale(b_, -1.0), "VecScale");
+    for (const auto& [row, index] : fixedRows_) check(VecSetValue(b_, row, values[index], INSERT_VALUES), "VecSetValue");
+    check(VecAssemblyBegin(b_), "VecAssemblyBegin");
+    check(VecAssemblyEnd(b_), "VecAssemblyEnd");
+    check(KSPSolve(ksp_, b_, x_), "KSPSolve");
+    result.solveSeconds = maxOverRanks(MPI_Wtime() - clock);
+    KSPConvergedReason reason;
+    check(KSPGetConvergedReason(ksp_, &reason), "KSPGetConvergedReason");
+    result.convergedReason = int(reason);
+    PetscInt iterations;
+    check(KSPGetIterationNumber(ksp_, &iterations), "KSPGetIterationNumber");
+    result.iterations = int(iterations);
+    {
+      // The true relative residual, whatever norm the solver watched.
+      Vec r;
+      check(VecDuplicate(b_, &r), "VecDuplicate");
+      check(MatMult(A_, x_, r), "MatMult");
+      check(VecAYPX(r, -1.0, b_), "VecAYPX");
+      PetscReal residual, rhs;
+      check(VecNorm(r, NORM_2, &residual), "VecNorm");
+      check(VecNorm(b_, NORM_2, &rhs), "VecNorm");
+      result.relativeResidual = rhs > 0 ? double(residual / rhs) : double(residual);
+      VecDestroy(&r);
     }
-    check(VecRestoreArrayRead(gathered, &g), "VecRestoreArrayRead");
+    if (reason <= 0) {
+      throw WorkerFailure(3, "the solver (" + result.solver + ") did not converge: KSP reason " + std::to_string(int(reason)) +
+                               " after " + std::to_string(result.iterations) + " iterations, relative residual " +
+                               std::to_string(result.relativeResidual));
+    }
+    // The imposed values exactly (the solver met them only to its tolerance).
+    for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
+    check(VecAssemblyBegin(x_), "VecAssemblyBegin");
+    check(VecAssemblyEnd(x_), "VecAssemblyEnd");
+
+    // The displacements, back in the job's node order, on rank 0.
+    VecScatter toZero;
+    Vec gathered;
+    check(VecScatterCreateToZero(x_, &toZero, &gathered), "VecScatterCreateToZero");
+    check(VecScatterBegin(toZero, x_, gathered, INSERT_VALUES, SCATTER_FORWARD), "VecScatterBegin");
+    check(VecScatterEnd(toZero, x_, gathered, INSERT_VALUES, SCATTER_FORWARD), "VecScatterEnd");
+    if (rank_ == 0) {
+      const PetscScalar* g;
+      check(VecGetArrayRead(gathered, &g), "VecGetArrayRead");
+      result.displacements.resize(std::size_t(3 * n_));
+      for (PetscInt old = 0; old < n_; ++old) {
+        const PetscInt node = numbering_.newOfOld[std::size_t(old)];
+        for (int d = 0; d < 3; ++d) result.displacements[std::size_t(3 * old + d)] = double(g[3 * node + d]);
+      }
+      check(VecRestoreArrayRead(gathered, &g), "VecRestoreArrayRead");
+    }
+    VecScatterDestroy(&toZero);
+    VecDestroy(&gathered);
+    progress(rank_, "done", 1.0);
+    return result;
   }
-  VecScatterDestroy(&toZero);
-  VecDestroy(&gathered);
-  MatNullSpaceDestroy(&rigidBodyModes);
-  VecDestroy(&coordinates);
-  KSPDestroy(&ksp);
-  VecDestroy(&x);
-  VecDestroy(&b);
-  MatDestroy(&A);
-  progress(rank, "done", 1.0);
-  return result;
+
+private:
+  bool mine(PetscInt newNode) const { return newNode >= first_ && newNode < first_ + owned_; }
+
+  const FiniteElementJob& job_;
+  int rank_, size_;
+  PetscInt n_ = 0, first_ = 0, owned_ = 0;
+  Numbering numbering_;
+  FiniteElementResult result_;
+  Mat A_ = nullptr, assembled_ = nullptr;
+  Vec x_ = nullptr, b_ = nullptr;
+  KSP ksp_ = nullptr;
+  std::vector<std::pair<PetscInt, std::size_t>> fixedRows_; ///< owned fixed dof, index into the values
+};
+
+/// Serves solves: "solve VALUES RESULT" (VALUES: the imposed displacements, a job-format file of
+/// the same fixed nodes) and "quit", one per line on standard input; answers "solved" or "failed".
+void serve(const FiniteElementJob& job, int rank, int size)
+{
+  PreparedProblem problem(job, rank, size, true);
+  if (rank == 0) {
+    std::printf("ready\n");
+    std::fflush(stdout);
+  }
+  for (;;) {
+    char line[4096] = {0};
+    if (rank == 0 && !std::fgets(line, sizeof(line), stdin)) std::strcpy(line, "quit");
+    MPI_Bcast(line, sizeof(line), MPI_CHAR, 0, PETSC_COMM_WORLD);
+    char command[16] = {0}, valuesFile[2048] = {0}, resultFile[2048] = {0};
+    std::sscanf(line, "%15s %2047s %2047s", command, valuesFile, resultFile);
+    if (std::strcmp(command, "quit") == 0) return;
+    if (std::strcmp(command, "solve") != 0) continue;
+    try {
+      const FiniteElementJob values = readFiniteElementJob(valuesFile);
+      if (values.fixedNodes != job.fixedNodes || values.fixedDisplacements.size() != job.fixedDisplacements.size()) {
+        throw WorkerFailure(2, std::string(valuesFile) + ": not the fixed nodes the worker was prepared for");
+      }
+      const FiniteElementResult result = problem.solveFor(values.fixedDisplacements);
+      if (rank == 0) {
+        writeFiniteElementResult(result, resultFile);
+        std::printf("solved\n");
+        std::fflush(stdout);
+      }
+    } catch (const std::exception& e) {
+      if (rank == 0) {
+        std::printf("failed %s\n", e.what());
+        std::fflush(stdout);
+      }
+    }
+  }
 }
+
 } // namespace
 
 int main(int argc, char** argv)
@@ -356,19 +415,26 @@ int main(int argc, char** argv)
   MPI_Comm_size(PETSC_COMM_WORLD, &size);
   int status = 0;
   try {
-    if (argc != 3) throw WorkerFailure(2, "usage: brainshift-fe-worker JOB RESULT");
+    const bool served = argc == 3 && std::strcmp(argv[1], "--serve") == 0;
+    if (argc != 3) throw WorkerFailure(2, "usage: brainshift-fe-worker JOB RESULT | brainshift-fe-worker --serve JOB");
+    const char* jobFile = served ? argv[2] : argv[1];
     FiniteElementJob job;
     try {
-      job = readFiniteElementJob(argv[1]);
+      job = readFiniteElementJob(jobFile);
       job.validate();
     } catch (const std::exception& e) {
-      throw WorkerFailure(2, std::string(argv[1]) + ": " + e.what());
+      throw WorkerFailure(2, std::string(jobFile) + ": " + e.what());
     }
     if (PetscOptionsInsertString(nullptr, job.solverOptions.c_str())) {
       throw WorkerFailure(2, "the solver options cannot be parsed: " + job.solverOptions);
     }
-    const FiniteElementResult result = solve(job, rank, size);
-    if (rank == 0) writeFiniteElementResult(result, argv[2]);
+    if (served) {
+      serve(job, rank, size);
+    } else {
+      PreparedProblem problem(job, rank, size, false);
+      const FiniteElementResult result = problem.solveFor(job.fixedDisplacements);
+      if (rank == 0) writeFiniteElementResult(result, argv[2]);
+    }
   } catch (const WorkerFailure& e) {
     if (rank == 0) std::fprintf(stderr, "brainshift-fe-worker: %s\n", e.what());
     status = e.status;

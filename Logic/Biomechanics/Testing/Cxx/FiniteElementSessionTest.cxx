@@ -1,0 +1,55 @@
+// Prepared before surgery, solved during it: a session prepares once (partition, assembly,
+// elimination, multigrid setup) and answers new imposed values for the same boundary nodes; each
+// answer equals a one-shot solve, and costs a fraction of the preparation.
+#include "BrainShiftTestingSupport.h"
+#include "FiniteElementTestSupport.h"
+
+#include <chrono>
+#include <iostream>
+
+int FiniteElementSessionTest(int, char*[])
+{
+  return brainshift::testing::runTest("FiniteElementSessionTest", [] {
+    using namespace brainshift;
+    const double side = 40.0;
+    const testing::Field first = [side](const double* p) {
+      return std::array<double, 3>{0.0, 0.0, -4.0 * std::sin(M_PI * p[0] / side) * std::sin(M_PI * p[1] / side) * p[2] / side};
+    };
+    const testing::Field second = [side](const double* p) {
+      return std::array<double, 3>{1.5 * p[2] / side, -0.02 * p[0], -6.0 * std::sin(M_PI * p[0] / side) * p[2] / side};
+    };
+    FiniteElementJob job = testing::cubeMesh(16, side, 0.2);
+    testing::imposeOnBoundary(job, side, first);
+    job.solverOptions = "-ksp_rtol 1e-10";
+    FiniteElementJob secondJob = job;
+    secondJob.fixedDisplacements.clear();
+    for (std::int32_t v : job.fixedNodes) {
+      const auto u = second(&job.nodes[3 * std::size_t(v)]);
+      secondJob.fixedDisplacements.insert(secondJob.fixedDisplacements.end(), u.begin(), u.end());
+    }
+
+    for (int ranks : {1, 2}) {
+      FiniteElementSession session(job, testing::workerOptions(ranks));
+      for (const FiniteElementJob* values : {&job, &secondJob, &job}) {
+        const auto start = std::chrono::steady_clock::now();
+        const FiniteElementResult served = session.solve(values->fixedDisplacements);
+        const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        const FiniteElementResult once = solveWithWorker(*values, testing::workerOptions(ranks));
+        double difference = 0;
+        for (std::size_t i = 0; i < once.displacements.size(); ++i) {
+          difference = std::max(difference, std::abs(served.displacements[i] - once.displacements[i]));
+        }
+        std::cout << ranks << " ranks: prepared in " << session.prepareSeconds() << " s (assembly " << served.assemblySeconds
+                  << ", setup " << served.setupSeconds << "), solve " << served.solveSeconds << " s (" << wall
+                  << " s as the caller sees it), " << served.iterations << " iterations, difference to one-shot " << difference
+                  << " mm\n";
+        BS_CHECK_MSG(difference < 1e-6, difference);
+        BS_CHECK(served.convergedReason > 0);
+        BS_CHECK_MSG(served.solveSeconds < session.prepareSeconds(), served.solveSeconds << " vs " << session.prepareSeconds());
+      }
+      // A malformed request is refused and the session goes on.
+      BS_CHECK_THROWS(session.solve({1.0, 2.0}), std::invalid_argument, "3 values per fixed node");
+      BS_CHECK(session.solve(job.fixedDisplacements).convergedReason > 0);
+    }
+  });
+}
