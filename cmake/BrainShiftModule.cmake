@@ -26,6 +26,8 @@ function(brainshift_add_test_driver)
   add_executable(${ARG_NAME} ${driver_sources})
   target_link_libraries(${ARG_NAME} PRIVATE BrainShiftTesting ${ARG_LIBS})
   target_compile_options(${ARG_NAME} PRIVATE -Wall -Wextra -Wno-deprecated-copy)
+  # VTK's object factories (readers, writers, data objects) register only with autoinit.
+  vtk_module_autoinit(TARGETS ${ARG_NAME} MODULES ${VTK_LIBRARIES})
   foreach(test ${ARG_TESTS})
     add_test(NAME ${test} COMMAND ${ARG_NAME} ${test})
     set_tests_properties(${test} PROPERTIES

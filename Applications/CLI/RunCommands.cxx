@@ -117,7 +117,8 @@ const std::vector<PipelineStage>& pipelineStages()
      runClassifyStage},
     {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", nullptr},
     {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
-    {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)", nullptr},
+    {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
+     runSimulateStage},
     {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "
              "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", nullptr},
   };

@@ -68,5 +68,6 @@ void runPipeline(RunContext& context);
 /// The stage runners (StageRunners.cxx).
 void runRigidStage(RunContext& context);
 void runClassifyStage(RunContext& context);
+void runSimulateStage(RunContext& context);
 
 } // namespace brainshift::cli

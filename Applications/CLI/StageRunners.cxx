@@ -1,6 +1,9 @@
 // The stages as the command line runs them: inputs from the run context, the stage's logic, its
 // files in the output folder, its entry in report.json.
+#include "BiomechanicalModel.h"
 #include "BrainShiftErrors.h"
+#include "FiniteElementSolver.h"
+#include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
 #include "RunCommands.h"
 #include "TissueClassificationLogic.h"
@@ -92,6 +95,47 @@ void runClassifyStage(RunContext& context)
   context.report().addWarnings(result.warnings);
   std::printf("  classify: %zu voxels, %zu prototypes, k-NN %.2f s, %.2f s%s\n", result.voxels, total, result.knnSeconds,
               seconds, result.tumourResected ? ", tumour resected" : "");
+}
+
+} // namespace brainshift::cli
+
+namespace brainshift::cli {
+
+void runSimulateStage(RunContext& context)
+{
+  Stopwatch clock;
+  const fs::path meshFile = context.output("mesh.vtu"), surfaceFile = context.output("brain_surface.vtp");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  if (!surface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
+  const Configuration& configuration = context.configuration();
+  const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, configuration, meshFile.string(), surfaceFile.string());
+  FiniteElementRunOptions options;
+  options.ranks = configuration.ranks;
+  options.worker = workerBesideExecutable();
+  options.progress = [](const std::string& stage, double) {
+    if (stage != "done") std::printf("  simulate: %s\n", stage.c_str());
+    std::fflush(stdout);
+  };
+  const FiniteElementResult result = solveWithWorker(job, options);
+  attachDisplacements(mesh, result);
+  writeModel(mesh, meshFile);
+  context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},
+                                         {"equations", result.equations},
+                                         {"ranks", result.ranks},
+                                         {"iterations", result.iterations},
+                                         {"relative_residual", result.relativeResidual},
+                                         {"assembly_seconds", result.assemblySeconds},
+                                         {"setup_seconds", result.setupSeconds},
+                                         {"solve_seconds", result.solveSeconds},
+                                         {"solver", result.solver},
+                                         {"partitioner", result.partitioner},
+                                         {"tetrahedra_per_rank", result.tetrahedraPerRank},
+                                         {"imposed_nodes", job.fixedNodes.size()}});
+  std::printf("  simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
+              static_cast<long long>(result.equations), result.ranks, result.iterations, result.relativeResidual,
+              result.assemblySeconds, result.setupSeconds, result.solveSeconds);
 }
 
 } // namespace brainshift::cli

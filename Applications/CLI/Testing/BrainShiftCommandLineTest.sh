@@ -172,7 +172,7 @@ RegisterNotAvailableYet)
 StagesNotAvailableYet)
   out=$work/stages-not-yet
   expect 1 "not available yet" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out"
-  expect 1 "not available yet" -- "$brainshift" simulate --output-dir "$out" --solver-options "-ksp_type cg"
+  expect 1 "not available yet" -- "$brainshift" surface --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   expect 2 "" -- "$brainshift" bench
   # Bad input is still bad input when the stage is missing.
   expect 2 "no such file" -- "$brainshift" mesh --preop-labels "$out/none.nii.gz" --output-dir "$out"
@@ -236,6 +236,28 @@ ClassifyStage)
   expect 2 "'p'" -- "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" --prototypes "$out/far.json"
   printf '{"classification": {"k": 0}}' > "$out/k0.json"
   expect 2 "classification.k" -- "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" --config "$out/k0.json"
+  ;;
+
+SimulateStage)
+  source_case=$(dirname "$work")/SimulateStageCase
+  out=$work/simulate-stage
+  rm -rf "$out" && mkdir -p "$out"
+  cp "$source_case/mesh.vtu" "$source_case/brain_surface.vtp" "$out/"
+  "$brainshift" simulate --output-dir "$out" --ranks 2 >/dev/null || fail "simulate exited $?"
+  grep -q 'Name="Displacement"' "$out/mesh.vtu" || fail "mesh.vtu has no point array Displacement"
+  for key in wall_seconds equations ranks iterations relative_residual assembly_seconds setup_seconds solve_seconds; do
+    json_value "$out/report.json" "['stages']['simulate']['$key']" >/dev/null || fail "report.json lacks simulate.$key"
+  done
+  [ "$(json_value "$out/report.json" "['stages']['simulate']['ranks']")" = "2" ] || fail "simulate did not run on 2 ranks"
+  float_check "$out/report.json" "['stages']['simulate']['relative_residual']" "< 1e-6"
+  # The paper's solver, through the options.
+  "$brainshift" simulate --output-dir "$out" --solver-options "-ksp_type gmres -pc_type bjacobi" >/dev/null || fail "gmres exited $?"
+  [ "$(json_value "$out/report.json" "['stages']['simulate']['solver']")" = "gmres+bjacobi" ] || fail "the solver options were not used"
+  printf '{"materials": {"4": {"poisson_ratio": 0.5}}}' > "$out/incompressible.json"
+  expect 2 "poisson_ratio" -- "$brainshift" simulate --output-dir "$out" --config "$out/incompressible.json"
+  expect 1 "did not converge" -- "$brainshift" simulate --output-dir "$out" --solver-options "-ksp_type cg -pc_type none -ksp_max_it 1"
+  rm "$out/brain_surface.vtp"
+  expect 2 "brain_surface.vtp: no such file" -- "$brainshift" simulate --output-dir "$out"
   ;;
 
 DemoEndToEnd)
