@@ -16,6 +16,8 @@ packages=(
   libcli11-dev nlohmann-json3-dev libgtest-dev
   # data: the Colin27 T1 template of the built-in case; python3 for the command-line tests
   mricron-data python3
+  # an independent finite element solver for the cross-check test
+  calculix-ccx
   # offscreen rendering and GUI tests
   xvfb xauth
   # fast BLAS for the direct solvers (switches the system alternative)
