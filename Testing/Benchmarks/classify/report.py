@@ -5,16 +5,13 @@ Reads OUT/machine.txt, OUT/classification_speed.json and OUT/classification_swee
 OUT/dice_vs_noise.png, OUT/dice_vs_bias.png and OUT/summary.md.
 """
 import csv
-import json
-import math
 import os
 import sys
-import tempfile
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+from benchmark_common import (  # noqa: E402  (benchmark_common.py is in the folder above)
+    finite, load_json, machine_section, output_folder, plt, report_missing, save_atomically,
+    table_row, write_atomically)
 
 # Targets of the classify stage.
 KNN_TARGET_SECONDS = 1.0
@@ -50,41 +47,6 @@ VARIABLES = {
     "bias": {"axis": "bias field strength (log amplitude)", "name": "bias",
              "level": "bias strength"},
 }
-
-
-def write_atomically(path, text):
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(temporary, path)
-
-
-def save_atomically(fig, path):
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-",
-                                     suffix=".png")
-    os.close(fd)
-    fig.savefig(temporary, dpi=100)
-    plt.close(fig)
-    os.replace(temporary, path)
-
-
-def load_json(path):
-    if not os.path.isfile(path):
-        print(f"report.py: {path} missing", file=sys.stderr)
-        return None
-    with open(path) as f:
-        return json.load(f)
-
-
-def finite(value):
-    """value as a float, or None when it is missing, not a number or infinite."""
-    if value is None or isinstance(value, bool):
-        return None
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
 
 
 def read_sweep(path):
@@ -260,26 +222,17 @@ def sweep_table(variable, rows):
     head = [VARIABLES[variable]["name"]] + (["N4"] if with_n4 else []) + [
         "brain Dice", "ventricle Dice", "parenchyma Dice", "brain surface distance (mm)",
         "stage seconds", "targets missed"]
-    lines = ["| " + " | ".join(head) + " |",
-             "|" + "---:|" * (len(head) - 1) + "---|"]
+    lines = [table_row(head), "|" + "---:|" * (len(head) - 1) + "---|"]
     for r in rows:
         cells = [f"{r['value']:g}"] + (["on" if r["n4"] else "off"] if with_n4 else []) + [
             fmt(r["brain_dice"]), fmt(r["ventricle_dice"]), fmt(r["parenchyma_dice"]),
             fmt(r["brain_surface_distance_mm"], 2), fmt(r["stage_seconds"], 2), missed_targets(r)]
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append(table_row(cells))
     return lines
 
 
 def summary_md(path, out, speed, sweeps, noise, bias, charts):
-    lines = ["# Tissue classification benchmark", ""]
-    machine = os.path.join(out, "machine.txt")
-    lines += ["## Machine", "", "```"]
-    if os.path.isfile(machine):
-        with open(machine) as f:
-            lines += f.read().rstrip("\n").split("\n")
-    else:
-        lines.append("machine.txt missing")
-    lines += ["```", ""]
+    lines = ["# Tissue classification benchmark", "", *machine_section(out)]
 
     s = speed or {}
     size = s.get("size", "full")
@@ -352,11 +305,7 @@ def summary_md(path, out, speed, sweeps, noise, bias, charts):
 
 
 def main():
-    if len(sys.argv) != 2:
-        sys.exit("usage: report.py OUT")
-    out = sys.argv[1]
-    if not os.path.isdir(out):
-        sys.exit(f"report.py: {out}: not a folder")
+    out = output_folder()
     speed = load_json(os.path.join(out, "classification_speed.json"))
     noise = finite((speed or {}).get("noise"))
     noise = DEFAULT_NOISE if noise is None else noise
@@ -380,7 +329,7 @@ def main():
                        f"(noise {noise:g}; N4 off solid, on dashed)", bias)
             charts.append("dice_vs_bias.png")
     else:
-        print(f"report.py: {csv_path} missing", file=sys.stderr)
+        report_missing(csv_path)
     summary_md(os.path.join(out, "summary.md"), out, speed, sweeps, noise, bias, charts)
     print(f"wrote {os.path.join(out, 'summary.md')}" + "".join(f", {c}" for c in charts))
 

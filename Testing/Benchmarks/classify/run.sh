@@ -13,55 +13,21 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-root=$(cd "$here/../../.." && pwd)
-build=${BRAINSHIFT_BUILD_DIR:-$root/build}
-brainshift=$build/bin/brainshift
+# root, build, brainshift; say, die, run, ensure_matplotlib, require_brainshift, prepare_output,
+# write_machine_description.
+# shellcheck source=SCRIPTDIR/../common.sh
+source "$here/../common.sh"
 out=${1:-$root/Testing/Benchmarks/results/classify}
 
-say() { printf '== %s\n' "$*"; }
-die() { printf 'run.sh: %s\n' "$*" >&2; exit 1; }
-
 # --- what the benchmark needs -------------------------------------------------------------------
-# The Python that has matplotlib: python3 on PATH if it does, else Debian's (python3-matplotlib
-# installs into /usr/bin/python3, which a pyenv or virtualenv python3 on PATH does not see).
-missing=()
-python=python3
-if ! python3 -c 'import matplotlib' >/dev/null 2>&1; then
-  python=/usr/bin/python3
-  "$python" -c 'import matplotlib' >/dev/null 2>&1 || missing+=(python3-matplotlib)
-fi
-if [ ${#missing[@]} -gt 0 ]; then
-  say "installing ${missing[*]}"
-  sudo=()
-  [ "$(id -u)" -eq 0 ] || sudo=(sudo)
-  "${sudo[@]}" apt-get update
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
-fi
-"$python" -c 'import matplotlib' >/dev/null 2>&1 || die "$python cannot import matplotlib"
-[ -x "$brainshift" ] || die "$brainshift not found: build BrainShift first with scripts/build.sh"
+ensure_matplotlib
+require_brainshift
 
-mkdir -p "$out"
-out=$(cd "$out" && pwd)
-# Results of an earlier run would mix with this one's.
-rm -f "$out/machine.txt" "$out/classification_speed.json" "$out/classification_sweep.csv" \
-  "$out/summary.md" "$out/dice_vs_noise.png" "$out/dice_vs_bias.png"
+prepare_output machine.txt classification_speed.json classification_sweep.csv summary.md \
+  dice_vs_noise.png dice_vs_bias.png
 
 # --- the machine --------------------------------------------------------------------------------
-{
-  echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
-  echo "uname: $(uname -a)"
-  echo "nproc: $(nproc)"
-  echo "cpu: $(lscpu | grep 'Model name' | sed 's/^Model name:[[:space:]]*//')"
-  echo "memory:"
-  free -h
-  "$brainshift" --version 2>&1 | head -n 1
-} > "$out/machine.txt"
-cat "$out/machine.txt"
-
-run() {
-  say "$*"
-  "$@" || die "failed (exit status $?): $*"
-}
+write_machine_description
 
 # --- BrainShift ---------------------------------------------------------------------------------
 run "$brainshift" bench classify --size full --output-dir "$out"

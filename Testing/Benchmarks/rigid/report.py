@@ -6,34 +6,17 @@ OUT/full/truth_evaluation.json and OUT/capture/capture_range.csv; writes
 OUT/capture_range.png, OUT/capture_range.md and OUT/summary.md.
 """
 import csv
-import json
 import os
 import sys
-import tempfile
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+from benchmark_common import (  # noqa: E402  (benchmark_common.py is in the folder above)
+    load_json, machine_section, output_folder, plt, report_missing, save_atomically, table_row,
+    write_atomically)
 from matplotlib.patches import Rectangle  # noqa: E402
 
 CRITERION = "success: head TRE max \u2264 1 mm and rotation error \u2264 0.5\u00b0"
 CRITERION_MD = "success: head TRE max <= 1 mm and rotation error <= 0.5 degrees"
-
-
-def write_atomically(path, text):
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(temporary, path)
-
-
-def load_json(path):
-    if not os.path.isfile(path):
-        print(f"report.py: {path} missing", file=sys.stderr)
-        return None
-    with open(path) as f:
-        return json.load(f)
 
 
 def number(text):
@@ -122,19 +105,14 @@ def capture_range_png(path, cells, rotations, translations, size):
     fig.suptitle(f"BrainShift rigid capture range, {size} case ({CRITERION})\n"
                  "hatched, (k!): k silent failures (failed but reported trustworthy); "
                  "grey \u2014: no failures", fontsize=9)
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-",
-                                     suffix=".png")
-    os.close(fd)
-    fig.savefig(temporary, dpi=100)
-    plt.close(fig)
-    os.replace(temporary, path)
+    save_atomically(fig, path)
 
 
 def markdown_grid(rotations, translations, cell_text):
-    lines = ["| rotation (deg) \\ translation (mm) | " + " | ".join(f"{t:g}" for t in translations)
-             + " |", "|---:|" + "---:|" * len(translations)]
+    lines = [table_row(["rotation (deg) \\ translation (mm)", *(f"{t:g}" for t in translations)]),
+             "|---:|" + "---:|" * len(translations)]
     for r in rotations:
-        lines.append(f"| {r:g} | " + " | ".join(cell_text(r, t) for t in translations) + " |")
+        lines.append(table_row([f"{r:g}", *(cell_text(r, t) for t in translations)]))
     return lines
 
 
@@ -189,15 +167,7 @@ def fmt(value, digits=3):
 
 
 def summary_md(path, out, accuracy, elastix, truth, capture):
-    lines = ["# Rigid registration benchmark", ""]
-    machine = os.path.join(out, "machine.txt")
-    lines += ["## Machine", "", "```"]
-    if os.path.isfile(machine):
-        with open(machine) as f:
-            lines += f.read().rstrip("\n").split("\n")
-    else:
-        lines.append("machine.txt missing")
-    lines += ["```", ""]
+    lines = ["# Rigid registration benchmark", "", *machine_section(out)]
 
     bs = accuracy or {}
     el = elastix or {}
@@ -257,11 +227,7 @@ def summary_md(path, out, accuracy, elastix, truth, capture):
 
 
 def main():
-    if len(sys.argv) != 2:
-        sys.exit("usage: report.py OUT")
-    out = sys.argv[1]
-    if not os.path.isdir(out):
-        sys.exit(f"report.py: {out}: not a folder")
+    out = output_folder()
     accuracy = load_json(os.path.join(out, "full", "rigid_accuracy.json"))
     elastix = load_json(os.path.join(out, "full", "elastix_accuracy.json"))
     truth = load_json(os.path.join(out, "full", "truth_evaluation.json"))
@@ -280,7 +246,7 @@ def main():
         capture_range_md(os.path.join(out, "capture_range.md"), cells, rotations, translations,
                          size)
     else:
-        print(f"report.py: {csv_path} missing", file=sys.stderr)
+        report_missing(csv_path)
     summary_md(os.path.join(out, "summary.md"), out, accuracy, elastix, truth, capture)
     print(f"wrote {os.path.join(out, 'summary.md')}"
           + (", capture_range.md, capture_range.png" if capture else ""))

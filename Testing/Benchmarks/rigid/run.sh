@@ -13,65 +13,21 @@
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-root=$(cd "$here/../../.." && pwd)
-build=${BRAINSHIFT_BUILD_DIR:-$root/build}
-brainshift=$build/bin/brainshift
+# root, build, brainshift; say, die, run, ensure_matplotlib, require_brainshift, prepare_output,
+# write_machine_description.
+# shellcheck source=SCRIPTDIR/../common.sh
+source "$here/../common.sh"
 out=${1:-$root/Testing/Benchmarks/results/rigid}
 
-say() { printf '== %s\n' "$*"; }
-die() { printf 'run.sh: %s\n' "$*" >&2; exit 1; }
-
 # --- what the benchmark needs -------------------------------------------------------------------
-# The Python that has matplotlib: python3 on PATH if it does, else Debian's (python3-matplotlib
-# installs into /usr/bin/python3, which a pyenv or virtualenv python3 on PATH does not see).
-missing=()
-command -v elastix >/dev/null 2>&1 || missing+=(elastix)
-python=python3
-if ! python3 -c 'import matplotlib' >/dev/null 2>&1; then
-  python=/usr/bin/python3
-  "$python" -c 'import matplotlib' >/dev/null 2>&1 || missing+=(python3-matplotlib)
-fi
-if [ ${#missing[@]} -gt 0 ]; then
-  say "installing ${missing[*]}"
-  sudo=()
-  [ "$(id -u)" -eq 0 ] || sudo=(sudo)
-  "${sudo[@]}" apt-get update
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
-fi
-command -v elastix >/dev/null 2>&1 || die "elastix not found after installing it"
-"$python" -c 'import matplotlib' >/dev/null 2>&1 || die "$python cannot import matplotlib"
-[ -x "$brainshift" ] || die "$brainshift not found: build BrainShift first with scripts/build.sh"
+ensure_matplotlib elastix
+require_brainshift
 
-mkdir -p "$out"
-out=$(cd "$out" && pwd)
-# Results of an earlier run would mix with this one's.
-rm -rf "$out/full" "$out/capture"
-rm -f "$out/machine.txt" "$out/summary.md" "$out/capture_range.md" "$out/capture_range.png"
+prepare_output full/ capture/ machine.txt summary.md capture_range.md capture_range.png
 
 # --- the machine --------------------------------------------------------------------------------
-{
-  echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
-  echo "uname: $(uname -a)"
-  echo "nproc: $(nproc)"
-  echo "cpu: $(lscpu | grep 'Model name' | sed 's/^Model name:[[:space:]]*//')"
-  echo "memory:"
-  free -h
-  elastix --version 2>&1 | head -n 1
-  "$brainshift" --version 2>&1 | head -n 1
-} > "$out/machine.txt"
-cat "$out/machine.txt"
-
-run() {
-  say "$*"
-  "$@" || die "failed (exit status $?): $*"
-}
-# run_logged LOG COMMAND...: the command's output goes to LOG.
-run_logged() {
-  local log=$1
-  shift
-  say "$* > $log"
-  "$@" > "$log" 2>&1 || { cat "$log" >&2; die "failed (exit status $?): $*"; }
-}
+elastix_version() { elastix --version 2>&1 | head -n 1; }
+write_machine_description elastix_version
 
 # --- BrainShift ---------------------------------------------------------------------------------
 run "$brainshift" bench rigid --size full --output-dir "$out/full"

@@ -8,12 +8,11 @@ import csv
 import math
 import os
 import sys
-import tempfile
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+from benchmark_common import (  # noqa: E402  (benchmark_common.py is in the folder above)
+    finite, machine_description, machine_section, output_folder, plt, report_missing,
+    save_atomically, table_row, write_atomically)
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import NullFormatter  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
@@ -49,33 +48,6 @@ OTHER_COLORS = ["tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray", "t
 RANK_STYLES = ["-", (0, (5, 3)), (0, (1, 2)), (0, (6, 2, 1, 2))]
 TARGET_COLOR = "crimson"
 PAPER_COLOR = "0.35"
-
-
-def write_atomically(path, text):
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(temporary, path)
-
-
-def save_atomically(fig, path):
-    fd, temporary = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tmp-",
-                                     suffix=".png")
-    os.close(fd)
-    fig.savefig(temporary, dpi=100)
-    plt.close(fig)
-    os.replace(temporary, path)
-
-
-def finite(value):
-    """value as a float, or None when it is missing, not a number or infinite."""
-    if value is None or isinstance(value, bool):
-        return None
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
 
 
 def whole_number(value):
@@ -163,12 +135,9 @@ def fastest(size, key):
 
 
 def read_nproc(out):
-    path = os.path.join(out, "machine.txt")
-    if os.path.isfile(path):
-        with open(path) as f:
-            for line in f:
-                if line.startswith("nproc:"):
-                    return whole_number(line.split(":", 1)[1])
+    for line in machine_description(out) or []:
+        if line.startswith("nproc:"):
+            return whole_number(line.split(":", 1)[1])
     return None
 
 
@@ -356,7 +325,7 @@ def size_table(size, solvers_anywhere):
             cells = [seconds(r["assembly"]), seconds(r["setup"]), timed("solve"), timed("whole"),
                      seconds(r["prepare_wall"]), count(r["iterations"]),
                      "n/a" if r["residual"] is None else f"{r['residual']:.1e}"]
-        lines.append(f"| {r['solver']} | {r['ranks']} | " + " | ".join(cells) + " |")
+        lines.append(table_row([r["solver"], str(r["ranks"]), *cells]))
     lines.append("")
     absent = [s for s in solvers_anywhere if not any(r["solver"] == s for r in size["runs"])]
     if absent:
@@ -454,15 +423,7 @@ def default_solver(sizes):
 
 
 def summary_md(path, out, runs, chart):
-    lines = ["# Finite element solve benchmark", ""]
-    machine = os.path.join(out, "machine.txt")
-    lines += ["## Machine", "", "```"]
-    if os.path.isfile(machine):
-        with open(machine) as f:
-            lines += f.read().rstrip("\n").split("\n")
-    else:
-        lines.append("machine.txt missing")
-    lines += ["```", ""]
+    lines = ["# Finite element solve benchmark", "", *machine_section(out)]
 
     sizes = group_sizes(runs or [])
     solvers = solver_order(runs or [])
@@ -513,11 +474,7 @@ def summary_md(path, out, runs, chart):
 
 
 def main():
-    if len(sys.argv) != 2:
-        sys.exit("usage: report.py OUT")
-    out = sys.argv[1]
-    if not os.path.isdir(out):
-        sys.exit(f"report.py: {out}: not a folder")
+    out = output_folder()
     runs = None
     chart = False
     csv_path = os.path.join(out, "simulate_bench.csv")
@@ -527,7 +484,7 @@ def main():
             time_chart(os.path.join(out, "time_vs_size.png"), runs)
             chart = True
     else:
-        print(f"report.py: {csv_path} missing", file=sys.stderr)
+        report_missing(csv_path)
     summary_md(os.path.join(out, "summary.md"), out, runs, chart)
     print(f"wrote {os.path.join(out, 'summary.md')}" + (", time_vs_size.png" if chart else ""))
 
