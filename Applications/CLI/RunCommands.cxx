@@ -115,7 +115,7 @@ const std::vector<PipelineStage>& pipelineStages()
               "(writes rigid_intraop_to_preop.tfm)", runRigidStage},
     {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)",
      runClassifyStage},
-    {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", nullptr},
+    {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", runMeshStage},
     {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
      runSimulateStage},

@@ -69,5 +69,6 @@ void runPipeline(RunContext& context);
 void runRigidStage(RunContext& context);
 void runClassifyStage(RunContext& context);
 void runSimulateStage(RunContext& context);
+void runMeshStage(RunContext& context);
 
 } // namespace brainshift::cli

@@ -3,6 +3,7 @@
 #include "BiomechanicalModel.h"
 #include "BrainShiftErrors.h"
 #include "FiniteElementSolver.h"
+#include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
 #include "RunCommands.h"
@@ -136,6 +137,42 @@ void runSimulateStage(RunContext& context)
   std::printf("  simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
               static_cast<long long>(result.equations), result.ranks, result.iterations, result.relativeResidual,
               result.assemblySeconds, result.setupSeconds, result.solveSeconds);
+}
+
+} // namespace brainshift::cli
+
+namespace brainshift::cli {
+
+void runMeshStage(RunContext& context)
+{
+  Stopwatch clock;
+  const Configuration& configuration = context.configuration();
+  MeshingParameters parameters;
+  parameters.resolutionMm = configuration.meshResolutionMm;
+  parameters.labels = configuration.meshLabels;
+  const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
+  writeModel(result.mesh, context.output("mesh.vtu"));
+  const MeshQuality& q = result.quality;
+  nlohmann::json volumes = nlohmann::json::object(), voxels = nlohmann::json::object();
+  for (const auto& [label, ml] : q.meshVolumeMl) {
+    volumes[std::to_string(label)] = ml;
+    voxels[std::to_string(label)] = q.voxelVolumeMl.at(label);
+  }
+  context.report().setStage("mesh", {{"wall_seconds", clock.seconds()},
+                                     {"backend", "lattice"},
+                                     {"resolution_mm", parameters.resolutionMm},
+                                     {"nodes", q.nodes},
+                                     {"tetrahedra", q.tetrahedra},
+                                     {"equations", 3 * q.nodes},
+                                     {"min_dihedral_degrees", q.minimumDihedralDegrees},
+                                     {"max_dihedral_degrees", q.maximumDihedralDegrees},
+                                     {"inverted_tetrahedra", q.invertedOrFlat},
+                                     {"radius_ratio_histogram", q.radiusRatioHistogram},
+                                     {"volume_ml", volumes},
+                                     {"voxel_volume_ml", voxels}});
+  context.report().addWarnings(result.warnings);
+  std::printf("  mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
+              q.minimumDihedralDegrees, q.maximumDihedralDegrees, clock.seconds());
 }
 
 } // namespace brainshift::cli

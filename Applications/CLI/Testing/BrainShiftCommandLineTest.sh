@@ -171,11 +171,13 @@ RegisterNotAvailableYet)
 
 StagesNotAvailableYet)
   out=$work/stages-not-yet
-  expect 1 "not available yet" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out"
+  expect 1 "not available yet" -- "$brainshift" warp --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   expect 1 "not available yet" -- "$brainshift" surface --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   expect 2 "" -- "$brainshift" bench
   # Bad input is still bad input when the stage is missing.
-  expect 2 "no such file" -- "$brainshift" mesh --preop-labels "$out/none.nii.gz" --output-dir "$out"
+  expect 2 "no such file" -- "$brainshift" warp --preop-image "$out/none.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   ;;
 
 DemoRefusesForeignFolder)
@@ -238,6 +240,24 @@ ClassifyStage)
   expect 2 "classification.k" -- "$brainshift" classify --preop-labels "$L" --intraop-image "$I" --output-dir "$out/again" --config "$out/k0.json"
   ;;
 
+MeshStage)
+  out=$work/mesh-stage
+  rm -rf "$out"
+  "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out" --mesh-resolution 6 >/dev/null \
+    || fail "mesh exited $?"
+  [ -s "$out/mesh.vtu" ] && grep -q 'Name="Label"' "$out/mesh.vtu" || fail "mesh.vtu lacks the cell array Label"
+  for key in wall_seconds nodes tetrahedra min_dihedral_degrees inverted_tetrahedra volume_ml; do
+    json_value "$out/report.json" "['stages']['mesh']['$key']" >/dev/null || fail "report.json lacks mesh.$key"
+  done
+  [ "$(json_value "$out/report.json" "['stages']['mesh']['inverted_tetrahedra']")" = "0" ] || fail "inverted tetrahedra"
+  float_check "$out/report.json" "['stages']['mesh']['min_dihedral_degrees']" ">= 10"
+  expect 2 "finer than the label map's voxels" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --output-dir "$out" --mesh-resolution 1
+  printf '{"mesh": {"labels": [2, 9]}}' > "$out/nine.json"
+  expect 2 "tissue label 9" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out" \
+    --config "$out/nine.json"
+  ;;
+
 SimulateStage)
   source_case=$(dirname "$work")/SimulateStageCase
   out=$work/simulate-stage
@@ -274,6 +294,7 @@ DemoEndToEnd)
   [ -s "$demo/rigid_intraop_to_preop.tfm" ] || fail "the demo's register did not run the rigid stage"
   float_check "$demo/evaluation.json" "['transforms']['brainshift_rigid']['groups']['head']['max_mm']" "< 0.6"
   [ -s "$demo/intraop_labels.nii.gz" ] || fail "the demo's register did not run the classify stage"
+  [ -s "$demo/mesh.vtu" ] || fail "the demo's register did not run the mesh stage"
   float_check "$demo/evaluation.json" "['classification']['brain_dice']" ">= 0.95"
   float_check "$demo/evaluation.json" "['classification']['brain_surface_distance_mm']" "<= 1.0"
   ;;

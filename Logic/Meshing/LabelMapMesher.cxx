@@ -1,0 +1,397 @@
+#include "LabelMapMesher.h"
+
+#include <vtkCellArray.h>
+#include <vtkCellData.h>
+#include <vtkIdList.h>
+#include <vtkIntArray.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+
+#include <algorithm>
+#include <cstring>
+#include <array>
+#include <cmath>
+#include <sstream>
+#include <unordered_map>
+
+namespace brainshift {
+
+namespace {
+using Vec = std::array<double, 3>;
+Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec cross(const Vec& a, const Vec& b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
+double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+double norm(const Vec& a) { return std::sqrt(dot(a, a)); }
+
+double signedVolume(const Vec p[4]) { return dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0]))) / 6.0; }
+
+/// The six dihedral angles (degrees) of a tetrahedron.
+std::array<double, 6> dihedralAngles(const Vec p[4])
+{
+  static const int edges[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
+  std::array<double, 6> angles{};
+  for (int e = 0; e < 6; ++e) {
+    const Vec& a = p[edges[e][0]];
+    const Vec axis = sub(p[edges[e][1]], a);
+    // Normals of the two faces meeting at the edge, each towards the opposite vertex's side.
+    Vec n1 = cross(axis, sub(p[edges[e][2]], a)), n2 = cross(axis, sub(p[edges[e][3]], a));
+    const double c = dot(n1, n2) / (norm(n1) * norm(n2));
+    angles[std::size_t(e)] = std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / M_PI;
+  }
+  return angles;
+}
+
+/// 3 r_in / r_circ.
+double radiusRatio(const Vec p[4])
+{
+  const double volume = std::abs(signedVolume(p));
+  double area = 0;
+  static const int faces[4][3] = {{0, 1, 2}, {0, 1, 3}, {0, 2, 3}, {1, 2, 3}};
+  for (const auto& f : faces) area += 0.5 * norm(cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]])));
+  const double inradius = 3.0 * volume / area;
+  // Circumradius: |a^2 (b x c) + b^2 (c x a) + c^2 (a x b)| / (12 V).
+  const Vec a = sub(p[1], p[0]), b = sub(p[2], p[0]), c = sub(p[3], p[0]);
+  const Vec bc = cross(b, c), ca = cross(c, a), ab = cross(a, b);
+  Vec s;
+  for (int i = 0; i < 3; ++i) s[std::size_t(i)] = dot(a, a) * bc[std::size_t(i)] + dot(b, b) * ca[std::size_t(i)] + dot(c, c) * ab[std::size_t(i)];
+  const double circumradius = norm(s) / (12.0 * volume);
+  return volume > 0 ? 3.0 * inradius / circumradius : 0.0;
+}
+} // namespace
+
+void MeshingParameters::validate(const LabelImage& image) const
+{
+  double finest = image.GetSpacing()[0];
+  double extent = 0;
+  for (unsigned i = 0; i < 3; ++i) {
+    finest = std::min(finest, double(image.GetSpacing()[i]));
+    extent = std::max(extent, image.GetSpacing()[i] * image.GetLargestPossibleRegion().GetSize()[i]);
+  }
+  if (!std::isfinite(resolutionMm) || resolutionMm < finest) {
+    std::ostringstream m;
+    m << "--mesh-resolution " << resolutionMm << " mm is finer than the label map's voxels (" << finest << " mm)";
+    throw InputError(m.str());
+  }
+  if (resolutionMm > extent / 4.0) {
+    std::ostringstream m;
+    m << "--mesh-resolution " << resolutionMm << " mm is absurdly coarse for a label map " << extent << " mm across";
+    throw InputError(m.str());
+  }
+  if (labels.empty()) throw InputError("meshing: no tissue labels to mesh");
+}
+
+LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& parameters)
+{
+  parameters.validate(image);
+  LabelMapMesh result;
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
+  std::set<int> chosen(parameters.labels.begin(), parameters.labels.end());
+  std::map<int, std::size_t> voxelCount;
+  // The bounding box (index space) of the chosen tissues.
+  long lo[3] = {long(size[0]), long(size[1]), long(size[2])}, hi[3] = {-1, -1, -1};
+  for (std::size_t k = 0; k < size[2]; ++k) {
+    for (std::size_t j = 0; j < size[1]; ++j) {
+      for (std::size_t i = 0; i < size[0]; ++i) {
+        const int l = voxels[i + size[0] * (j + size[1] * k)];
+        if (!chosen.count(l)) continue;
+        voxelCount[l] += 1;
+        const long idx[3] = {long(i), long(j), long(k)};
+        for (int d = 0; d < 3; ++d) {
+          lo[d] = std::min(lo[d], idx[d]);
+          hi[d] = std::max(hi[d], idx[d]);
+        }
+      }
+    }
+  }
+  if (voxelCount.empty()) throw InputError("meshing: the label map holds none of the tissues to mesh");
+  for (int l : chosen) {
+    if (!voxelCount.count(l)) throw InputError("meshing: tissue label " + std::to_string(l) + " is not in the label map");
+  }
+  // Lattice in continuous index space: steps of h / spacing voxels, covering the box with a margin.
+  double step[3];
+  long cells[3];
+  double start[3];
+  for (int d = 0; d < 3; ++d) {
+    step[d] = parameters.resolutionMm / image.GetSpacing()[unsigned(d)];
+    start[d] = double(lo[d]) - 0.5 - 0.5 * step[d];
+    cells[d] = long(std::ceil((double(hi[d]) + 0.5 - start[d]) / step[d]));
+  }
+  auto tissueAt = [&](const double c[3]) -> int {
+    long idx[3];
+    for (int d = 0; d < 3; ++d) {
+      idx[d] = std::lround(c[d]);
+      if (idx[d] < 0 || idx[d] >= long(size[unsigned(d)])) return 0;
+    }
+    return voxels[std::size_t(idx[0]) + size[0] * (std::size_t(idx[1]) + size[1] * std::size_t(idx[2]))];
+  };
+  std::unordered_map<long long, vtkIdType> nodeOf;
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  auto node = [&](long i, long j, long k) {
+    const long long key = (long long)i + (long long)(cells[0] + 1) * ((long long)j + (long long)(cells[1] + 1) * k);
+    auto [at, inserted] = nodeOf.emplace(key, points->GetNumberOfPoints());
+    if (inserted) {
+      itk::ContinuousIndex<double, 3> c;
+      c[0] = start[0] + double(i) * step[0];
+      c[1] = start[1] + double(j) * step[1];
+      c[2] = start[2] + double(k) * step[2];
+      PhysicalPoint p;
+      image.TransformContinuousIndexToPhysicalPoint(c, p);
+      points->InsertNextPoint(p[0], p[1], p[2]);
+    }
+    return at->second;
+  };
+  // Every lattice tetrahedron's tissue (-1: not meshed), by its centroid.
+  const int paths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  const long long cellCount = (long long)cells[0] * cells[1] * cells[2];
+  std::vector<int> tissueOf(std::size_t(cellCount * 6), -1);
+  auto cornersOf = [&](long long tet, long corner[4][3]) {
+    const long long cell = tet / 6;
+    const int p = int(tet % 6);
+    long c[3] = {long(cell % cells[0]), long((cell / cells[0]) % cells[1]), long(cell / ((long long)cells[0] * cells[1]))};
+    std::copy(c, c + 3, corner[0]);
+    for (int s = 0; s < 3; ++s) {
+      c[paths[p][s]] += 1;
+      std::copy(c, c + 3, corner[s + 1]);
+    }
+  };
+  auto nodeKey = [&](const long q[3]) { return (long long)q[0] + (long long)(cells[0] + 1) * ((long long)q[1] + (long long)(cells[1] + 1) * q[2]); };
+  for (long long t = 0; t < cellCount * 6; ++t) {
+    long corner[4][3];
+    cornersOf(t, corner);
+    double centroid[3] = {0, 0, 0};
+    for (const auto& q : corner) {
+      for (int d = 0; d < 3; ++d) centroid[d] += (start[d] + double(q[d]) * step[d]) / 4.0;
+    }
+    const int tissue = tissueAt(centroid);
+    if (chosen.count(tissue)) tissueOf[std::size_t(t)] = tissue;
+  }
+
+  // Topology repair: labelling by centroid can leave a region touching itself only along an edge
+  // (a non-manifold edge: four boundary triangles on it). Around such an edge the lattice
+  // tetrahedra that separate the region's wedges join the region, until every boundary edge of
+  // the union of tissues and of each tissue has exactly two triangles.
+  static const int faceCorners[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  std::size_t repaired = 0;
+  for (int pass = 0; pass < 30; ++pass) {
+    bool changed = false;
+    std::vector<int> regions{-2}; // -2: the union of the chosen tissues
+    regions.insert(regions.end(), chosen.begin(), chosen.end());
+    for (int region : regions) {
+      auto inRegion = [&](long long t) {
+        const int l = tissueOf[std::size_t(t)];
+        return region == -2 ? l >= 0 : l == region;
+      };
+      std::unordered_map<std::string, int> faceCount;
+      auto key3 = [](long long a, long long b, long long c) {
+        long long k[3] = {a, b, c};
+        std::sort(k, k + 3);
+        return std::string(reinterpret_cast<const char*>(k), sizeof(k));
+      };
+      for (long long t = 0; t < cellCount * 6; ++t) {
+        if (!inRegion(t)) continue;
+        long corner[4][3];
+        cornersOf(t, corner);
+        for (const auto& f : faceCorners) faceCount[key3(nodeKey(corner[f[0]]), nodeKey(corner[f[1]]), nodeKey(corner[f[2]]))] += 1;
+      }
+      std::map<std::pair<long long, long long>, int> edgeCount;
+      for (const auto& [k, count] : faceCount) {
+        if (count != 1) continue;
+        long long v[3];
+        std::memcpy(v, k.data(), sizeof(v));
+        for (int e = 0; e < 3; ++e) edgeCount[{std::min(v[e], v[(e + 1) % 3]), std::max(v[e], v[(e + 1) % 3])}] += 1;
+      }
+      for (const auto& [edge, count] : edgeCount) {
+        if (count <= 2) continue;
+        // The lattice tetrahedra around the edge, in the cells that hold both of its ends.
+        auto decode = [&](long long k, long q[3]) {
+          q[0] = long(k % (cells[0] + 1));
+          q[1] = long((k / (cells[0] + 1)) % (cells[1] + 1));
+          q[2] = long(k / ((long long)(cells[0] + 1) * (cells[1] + 1)));
+        };
+        long a[3], b[3];
+        decode(edge.first, a);
+        decode(edge.second, b);
+        std::vector<long long> ring;
+        std::map<int, int> around;
+        long range[3][2];
+        for (int d = 0; d < 3; ++d) {
+          range[d][0] = a[d] == b[d] ? a[d] - 1 : std::min(a[d], b[d]);
+          range[d][1] = std::min(a[d], b[d]);
+        }
+        for (long k = range[2][0]; k <= range[2][1]; ++k) {
+          for (long j = range[1][0]; j <= range[1][1]; ++j) {
+            for (long i = range[0][0]; i <= range[0][1]; ++i) {
+              if (i < 0 || j < 0 || k < 0 || i >= cells[0] || j >= cells[1] || k >= cells[2]) continue;
+              for (int p = 0; p < 6; ++p) {
+                const long long t = ((long long)i + (long long)cells[0] * ((long long)j + (long long)cells[1] * k)) * 6 + p;
+                long corner[4][3];
+                cornersOf(t, corner);
+                bool hasA = false, hasB = false;
+                for (const auto& q : corner) {
+                  hasA = hasA || (q[0] == a[0] && q[1] == a[1] && q[2] == a[2]);
+                  hasB = hasB || (q[0] == b[0] && q[1] == b[1] && q[2] == b[2]);
+                }
+                if (!hasA || !hasB) continue;
+                ring.push_back(t);
+                if (inRegion(t)) around[tissueOf[std::size_t(t)]] += 1;
+              }
+            }
+          }
+        }
+        int fill = region;
+        if (region == -2) { // the most common tissue around the edge
+          int best = 0;
+          for (const auto& [l, n] : around) {
+            if (n > best) {
+              best = n;
+              fill = l;
+            }
+          }
+        }
+        for (long long t : ring) {
+          if (!inRegion(t)) {
+            tissueOf[std::size_t(t)] = fill;
+            ++repaired;
+            changed = true;
+          }
+        }
+      }
+    }
+    if (!changed) break;
+    if (pass == 29) {
+      result.warnings.push_back("mesh: the topology repair did not settle in 30 passes; some surfaces may stay non-manifold");
+    }
+  }
+  if (repaired > 0) {
+    result.warnings.push_back("mesh: " + std::to_string(repaired) +
+                              " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
+  }
+
+  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  vtkNew<vtkCellArray> tetrahedra;
+  vtkNew<vtkIntArray> labelArray;
+  labelArray->SetName("Label");
+  for (long long t = 0; t < cellCount * 6; ++t) {
+    const int tissue = tissueOf[std::size_t(t)];
+    if (tissue < 0) continue;
+    long corner[4][3];
+    cornersOf(t, corner);
+    vtkIdType ids[4];
+    Vec p[4];
+    for (int v = 0; v < 4; ++v) {
+      ids[v] = node(corner[v][0], corner[v][1], corner[v][2]);
+      points->GetPoint(ids[v], p[v].data());
+    }
+    if (signedVolume(p) < 0) std::swap(ids[2], ids[3]); // the image's direction may mirror the lattice
+    tetrahedra->InsertNextCell(4, ids);
+    labelArray->InsertNextValue(tissue);
+  }
+  mesh->SetPoints(points);
+  mesh->SetCells(VTK_TETRA, tetrahedra);
+  mesh->GetCellData()->AddArray(labelArray);
+  result.mesh = mesh;
+  result.quality = measureMeshQuality(mesh, &image);
+  for (int l : chosen) {
+    if (!result.quality.meshVolumeMl.count(l)) {
+      throw InputError("meshing: tissue label " + std::to_string(l) + " (" + std::to_string(result.quality.voxelVolumeMl[l]) +
+                       " ml) vanishes at " + std::to_string(parameters.resolutionMm) + " mm; choose a finer --mesh-resolution");
+    }
+    const double ratio = result.quality.meshVolumeMl[l] / result.quality.voxelVolumeMl[l];
+    if (std::abs(ratio - 1.0) > 0.1) {
+      std::ostringstream w;
+      w << "mesh: tissue " << l << " has " << result.quality.meshVolumeMl[l] << " ml in the mesh for "
+        << result.quality.voxelVolumeMl[l] << " ml of voxels (" << int(std::lround(100 * (ratio - 1))) << " %) at "
+        << parameters.resolutionMm << " mm";
+      result.warnings.push_back(w.str());
+    }
+  }
+  return result;
+}
+
+MeshQuality measureMeshQuality(vtkUnstructuredGrid* mesh, const LabelImage* labels)
+{
+  MeshQuality q;
+  q.nodes = std::size_t(mesh->GetNumberOfPoints());
+  q.tetrahedra = std::size_t(mesh->GetNumberOfCells());
+  q.minimumDihedralDegrees = 180;
+  q.radiusRatioHistogram.assign(10, 0);
+  vtkDataArray* label = mesh->GetCellData()->GetArray("Label");
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    mesh->GetCellPoints(c, ids);
+    Vec p[4];
+    for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), p[v].data());
+    const double volume = signedVolume(p);
+    if (!(volume > 0)) {
+      ++q.invertedOrFlat;
+      continue;
+    }
+    for (double a : dihedralAngles(p)) {
+      q.minimumDihedralDegrees = std::min(q.minimumDihedralDegrees, a);
+      q.maximumDihedralDegrees = std::max(q.maximumDihedralDegrees, a);
+    }
+    q.radiusRatioHistogram[std::min<std::size_t>(9, std::size_t(radiusRatio(p) * 10))] += 1;
+    if (label) q.meshVolumeMl[int(std::lround(label->GetComponent(c, 0)))] += volume / 1000.0;
+  }
+  if (labels) {
+    const double voxelMl = labels->GetSpacing()[0] * labels->GetSpacing()[1] * labels->GetSpacing()[2] / 1000.0;
+    const LabelPixel* v = labels->GetBufferPointer();
+    for (std::size_t i = 0, n = labels->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+      if (q.meshVolumeMl.count(v[i]) || v[i] != 0) q.voxelVolumeMl[v[i]] += voxelMl;
+    }
+  }
+  return q;
+}
+
+vtkSmartPointer<vtkPolyData> boundarySurface(vtkUnstructuredGrid* mesh, const std::set<int>& tissues)
+{
+  vtkDataArray* label = mesh->GetCellData()->GetArray("Label");
+  if (!label) throw std::invalid_argument("the mesh has no cell array Label");
+  // Faces of the chosen tetrahedra, keyed by their sorted nodes; a face seen once is boundary.
+  struct Face {
+    vtkIdType oriented[3];
+    int count = 0;
+  };
+  std::map<std::array<vtkIdType, 3>, Face> faces;
+  static const int local[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}}; // outward for positive tetrahedra
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    if (!tissues.count(int(std::lround(label->GetComponent(c, 0))))) continue;
+    mesh->GetCellPoints(c, ids);
+    for (const auto& f : local) {
+      std::array<vtkIdType, 3> key{ids->GetId(f[0]), ids->GetId(f[1]), ids->GetId(f[2])};
+      std::array<vtkIdType, 3> sorted = key;
+      std::sort(sorted.begin(), sorted.end());
+      Face& face = faces[sorted];
+      if (face.count++ == 0) std::copy(key.begin(), key.end(), face.oriented);
+    }
+  }
+  auto surface = vtkSmartPointer<vtkPolyData>::New();
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  vtkNew<vtkCellArray> triangles;
+  vtkNew<vtkIntArray> nodeIds;
+  nodeIds->SetName("MeshNodeId");
+  std::map<vtkIdType, vtkIdType> surfacePointOf;
+  for (const auto& [key, face] : faces) {
+    if (face.count != 1) continue;
+    vtkIdType triangle[3];
+    for (int v = 0; v < 3; ++v) {
+      auto [at, inserted] = surfacePointOf.emplace(face.oriented[v], points->GetNumberOfPoints());
+      if (inserted) {
+        points->InsertNextPoint(mesh->GetPoint(face.oriented[v]));
+        nodeIds->InsertNextValue(int(face.oriented[v]));
+      }
+      triangle[v] = at->second;
+    }
+    triangles->InsertNextCell(3, triangle);
+  }
+  surface->SetPoints(points);
+  surface->SetPolys(triangles);
+  surface->GetPointData()->AddArray(nodeIds);
+  return surface;
+}
+
+} // namespace brainshift
