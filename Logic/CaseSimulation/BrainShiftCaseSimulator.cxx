@@ -2,6 +2,7 @@
 
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
+#include "DistanceMaps.h"
 #include "IntensityStatistics.h"
 #include "VolumeIO.h"
 
@@ -11,7 +12,6 @@
 #include <itkEuler3DTransform.h>
 #include <itkMultiThreaderBase.h>
 #include <itkRelabelComponentImageFilter.h>
-#include <itkSignedMaurerDistanceMapImageFilter.h>
 
 #include <nlohmann/json.hpp>
 
@@ -26,7 +26,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using MaskImage = itk::Image<unsigned char, 3>;
 using Vec3 = std::array<double, 3>;
 
 enum Label : LabelPixel { Background = 0, Head = 1, Parenchyma = 2, Ventricles = 3, Tumour = 4 };
@@ -218,20 +217,6 @@ MaskImage::Pointer largestComponent(const MaskImage* mask)
   return out;
 }
 
-/// Signed distance in mm to the mask's boundary: negative inside.
-ScalarImage::Pointer signedDistance(const MaskImage* mask)
-{
-  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
-  distance->SetInput(mask);
-  distance->SetUseImageSpacing(true);
-  distance->SetSquaredDistance(false);
-  distance->SetInsideIsPositive(false);
-  distance->SetBackgroundValue(0);
-  distance->Update();
-  ScalarImage::Pointer out = distance->GetOutput();
-  out->DisconnectPipeline();
-  return out;
-}
 
 /// Fills the holes of each axial slice (background not connected to the slice's border).
 void fillHolesPerSlice(MaskImage* mask, const Grid& g)
@@ -449,10 +434,10 @@ SimulatedCase simulateCase(const CaseParameters& P)
   headMask = largestComponent(headMask);
   {
     // Close small gaps (2 mm) so that the skull, dark in T1, is enclosed by the scalp.
-    ScalarImage::Pointer outside = signedDistance(headMask);
+    ScalarImage::Pointer outside = signedDistanceMm(headMask);
     auto dilated = newImage<MaskImage>(G, 0);
     for (std::size_t i = 0; i < N; ++i) dilated->GetBufferPointer()[i] = outside->GetBufferPointer()[i] <= 2.0f;
-    ScalarImage::Pointer inside = signedDistance(dilated);
+    ScalarImage::Pointer inside = signedDistanceMm(dilated);
     for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = inside->GetBufferPointer()[i] <= -2.0f || brain[i];
   }
   fillHolesPerSlice(headMask, G);
@@ -473,7 +458,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
   // -- Ventricles: the ventricular system is the thick dark CSF (opened by 1.5 mm, so that thin
   //    sulcal CSF drops out) at least 4 mm inside the brain that connects to a seed: dark CSF at
   //    least 12 mm deep within 40 mm of the brain's centre, in pieces of 1 ml or more.
-  ScalarImage::Pointer brainDistance = signedDistance(brainMask);
+  ScalarImage::Pointer brainDistance = signedDistanceMm(brainMask);
   const float* brainDepth = brainDistance->GetBufferPointer();
   Vec3 brainCentroid{0, 0, 0};
   double brainCount = 0;
@@ -493,10 +478,10 @@ SimulatedCase simulateCase(const CaseParameters& P)
   }
   {
     const double radius = 1.5;
-    ScalarImage::Pointer toDark = signedDistance(ventricleMask);
+    ScalarImage::Pointer toDark = signedDistanceMm(ventricleMask);
     auto eroded = newImage<MaskImage>(G, 0);
     for (std::size_t i = 0; i < N; ++i) eroded->GetBufferPointer()[i] = toDark->GetBufferPointer()[i] <= -radius + 1e-3;
-    ScalarImage::Pointer toEroded = signedDistance(eroded);
+    ScalarImage::Pointer toEroded = signedDistanceMm(eroded);
     for (std::size_t i = 0; i < N; ++i) {
       ventricleMask->GetBufferPointer()[i] = ventricleMask->GetBufferPointer()[i] && toEroded->GetBufferPointer()[i] <= radius + 1e-3;
     }
@@ -516,7 +501,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
       ventricleMask->GetBufferPointer()[i] = c && double(seedVoxels[c]) * voxelMl >= 0.2 && double(size[c]) >= minimumVoxels;
     }
     // Give back what the opening trimmed: the dark CSF within 2 mm of the ventricles kept.
-    ScalarImage::Pointer toVentricles = signedDistance(ventricleMask);
+    ScalarImage::Pointer toVentricles = signedDistanceMm(ventricleMask);
     for (std::size_t i = 0; i < N; ++i) {
       ventricleMask->GetBufferPointer()[i] = darkDeep[i] && toVentricles->GetBufferPointer()[i] <= 2.0f;
     }
@@ -839,8 +824,8 @@ SimulatedCase simulateCase(const CaseParameters& P)
       cavityMask->GetBufferPointer()[i] = brain[i] && dLabels[i] == Background && labels[i] != Head &&
                                           sampleNearest<LabelPixel>(G, labels, G.pointOf(i) + sampleField(W, w, G.pointOf(i)), 0) == Tumour;
     }
-    ScalarImage::Pointer tissueDepth = signedDistance(deformedBrainMask);
-    ScalarImage::Pointer cavityDistance = signedDistance(cavityMask);
+    ScalarImage::Pointer tissueDepth = signedDistanceMm(deformedBrainMask);
+    ScalarImage::Pointer cavityDistance = signedDistanceMm(cavityMask);
     const bool hasCavity = figures.cavityVolumeMl > 0;
     auto insideIntraopView = [&](const Vec3& xPrime) {
       const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(xPrime))));

@@ -1,6 +1,6 @@
 #include "LabelOverlap.h"
 
-#include <itkSignedMaurerDistanceMapImageFilter.h>
+#include "DistanceMaps.h"
 
 #include <cmath>
 #include <stdexcept>
@@ -8,7 +8,6 @@
 namespace brainshift {
 
 namespace {
-using MaskImage = itk::Image<unsigned char, 3>;
 
 void requireSameGrid(const LabelImage& a, const LabelImage& b)
 {
@@ -29,18 +28,6 @@ MaskImage::Pointer regionOf(const LabelImage& image, const std::set<LabelPixel>&
   return mask;
 }
 
-/// Distance (mm) from every voxel to the boundary of the region (|signed distance| minus half a voxel).
-ScalarImage::Pointer boundaryDistance(const MaskImage* region)
-{
-  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
-  distance->SetInput(region);
-  distance->SetUseImageSpacing(true);
-  distance->SetSquaredDistance(false);
-  distance->Update();
-  ScalarImage::Pointer out = distance->GetOutput();
-  out->DisconnectPipeline();
-  return out;
-}
 
 /// Boundary voxels: in the region with a face neighbour outside it.
 std::vector<std::size_t> boundaryVoxels(const MaskImage& region)
@@ -82,7 +69,7 @@ double meanSurfaceDistanceMm(const LabelImage& a, const LabelImage& b, const std
 {
   requireSameGrid(a, b);
   const MaskImage::Pointer regionA = regionOf(a, labels), regionB = regionOf(b, labels);
-  const ScalarImage::Pointer toA = boundaryDistance(regionA), toB = boundaryDistance(regionB);
+  const ScalarImage::Pointer toA = signedDistanceMm(regionA), toB = signedDistanceMm(regionB);
   const std::vector<std::size_t> boundaryA = boundaryVoxels(*regionA), boundaryB = boundaryVoxels(*regionB);
   if (boundaryA.empty() || boundaryB.empty()) return std::numeric_limits<double>::infinity();
   // The signed distance at a boundary voxel of the other region is its distance to this region's

@@ -1,5 +1,6 @@
 #include "RigidRegistrationLogic.h"
 
+#include "DistanceMaps.h"
 #include "IntensityStatistics.h"
 
 #include <itkBinShrinkImageFilter.h>
@@ -10,7 +11,6 @@
 #include <itkMultiThreaderBase.h>
 #include <itkRegistrationParameterScalesFromPhysicalShift.h>
 #include <itkRegularStepGradientDescentOptimizerv4.h>
-#include <itkSignedMaurerDistanceMapImageFilter.h>
 #include <itkVersorRigid3DTransform.h>
 
 #include <algorithm>
@@ -29,7 +29,6 @@ using Metric = itk::MattesMutualInformationImageToImageMetricv4<ScalarImage, Sca
 using PointSet = Metric::FixedSampledPointSetType;
 using Optimizer = itk::RegularStepGradientDescentOptimizerv4<double>;
 using ScalesEstimator = itk::RegistrationParameterScalesFromPhysicalShift<Metric>;
-using MaskImage = itk::Image<unsigned char, 3>;
 using MaskObject = itk::ImageMaskSpatialObject<3>;
 using Interpolator = itk::LinearInterpolateImageFunction<ScalarImage, double>;
 
@@ -133,12 +132,8 @@ MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
   binary->Allocate();
   const std::size_t n = coarse->GetLargestPossibleRegion().GetNumberOfPixels();
   for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = coarse->GetBufferPointer()[i] > 0.0f;
-  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
-  distance->SetInput(binary);
-  distance->SetUseImageSpacing(true);
-  distance->SetSquaredDistance(false);
-  distance->Update();
-  for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = distance->GetOutput()->GetBufferPointer()[i] <= dilationMm;
+  const ScalarImage::Pointer distance = signedDistanceMm(binary);
+  for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = distance->GetBufferPointer()[i] <= dilationMm;
   auto object = MaskObject::New();
   object->SetImage(binary);
   object->Update();

@@ -1,6 +1,7 @@
 #include "TissueClassificationLogic.h"
 
 #include "AtomicFile.h"
+#include "DistanceMaps.h"
 #include "MarkupsIO.h"
 
 #include <itkBSplineControlPointImageFilter.h>
@@ -9,7 +10,6 @@
 #include <itkN4BiasFieldCorrectionImageFilter.h>
 #include <itkRelabelComponentImageFilter.h>
 #include <itkShrinkImageFilter.h>
-#include <itkSignedMaurerDistanceMapImageFilter.h>
 
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
@@ -28,7 +28,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using MaskImage = itk::Image<unsigned char, 3>;
 using Clock = std::chrono::steady_clock;
 enum : LabelPixel { Background = 0, Head = 1, Parenchyma = 2, Ventricles = 3, Tumour = 4 };
 
@@ -167,14 +166,7 @@ std::vector<TissueDistance> tissueDistances(const LabelImage& labels, const std:
       for (std::size_t b = 0; b < coarseCount; ++b) best = std::max(best, fraction[t][b] / binVoxels[b]);
       for (std::size_t b = 0; b < coarseCount; ++b) mask->GetBufferPointer()[b] = best > 0 && fraction[t][b] / binVoxels[b] >= 0.5f * best;
     }
-    auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
-    distance->SetInput(mask);
-    distance->SetUseImageSpacing(true);
-    distance->SetSquaredDistance(false);
-    distance->SetInsideIsPositive(false);
-    distance->Update();
-    TissueDistance td{tissues[t], distance->GetOutput(), 0.0};
-    td.distance->DisconnectPipeline();
+    TissueDistance td{tissues[t], signedDistanceMm(mask), 0.0};
     const float* d = td.distance->GetBufferPointer();
     td.deepestMm = -double(*std::min_element(d, d + coarseCount));
     result.push_back(td);
@@ -325,19 +317,6 @@ double median(std::vector<float> v)
   return v[v.size() / 2];
 }
 
-/// Signed distance on the intraoperative grid (mm, negative inside).
-ScalarImage::Pointer signedDistance(const MaskImage* mask)
-{
-  auto distance = itk::SignedMaurerDistanceMapImageFilter<MaskImage, ScalarImage>::New();
-  distance->SetInput(mask);
-  distance->SetUseImageSpacing(true);
-  distance->SetSquaredDistance(false);
-  distance->SetInsideIsPositive(false);
-  distance->Update();
-  ScalarImage::Pointer out = distance->GetOutput();
-  out->DisconnectPipeline();
-  return out;
-}
 
 template <class TLabel>
 itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySize)
@@ -640,13 +619,13 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     for (std::size_t i = 0; i < N; ++i) {
       fluid->GetBufferPointer()[i] = isBrain(out[i]) && intensity[i] < fluidThreshold && !(tumourPresent && out[i] == Tumour);
     }
-    ScalarImage::Pointer toFluid = signedDistance(fluid);
+    ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
     auto core = MaskImage::New();
     core->CopyInformation(fluid);
     core->SetRegions(fluid->GetLargestPossibleRegion());
     core->Allocate();
     for (std::size_t i = 0; i < N; ++i) core->GetBufferPointer()[i] = toFluid->GetBufferPointer()[i] <= -P.fluidOpeningMm;
-    ScalarImage::Pointer toCore = signedDistance(core);
+    ScalarImage::Pointer toCore = signedDistanceMm(core);
     auto thick = MaskImage::New();
     thick->CopyInformation(fluid);
     thick->SetRegions(fluid->GetLargestPossibleRegion());
