@@ -49,7 +49,7 @@ int FiniteElementFailureTest(int, char*[])
     const auto start = std::chrono::steady_clock::now();
     BS_CHECK_THROWS(solveWithWorker(big, impatient), MethodError, "timed out");
     const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    BS_CHECK_MSG(waited < 8.0, waited);
+    BS_CHECK_MSG(waited < 30.0, waited); // unstopped, this solve would run for days
 
     // Cancelled from another thread.
     std::atomic<bool> cancel{false};

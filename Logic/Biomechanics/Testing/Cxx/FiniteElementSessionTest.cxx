@@ -1,6 +1,7 @@
 // Prepared before surgery, solved during it: a session prepares once (partition, assembly,
 // elimination, multigrid setup) and answers new imposed values for the same boundary nodes; each
-// answer equals a one-shot solve, and costs a fraction of the preparation.
+// answer equals a one-shot solve and reuses the one preparation (its speed is measured by
+// Testing/Benchmarks/simulate, not here).
 #include "BrainShiftTestingSupport.h"
 #include "FiniteElementTestSupport.h"
 
@@ -30,6 +31,7 @@ int FiniteElementSessionTest(int, char*[])
 
     for (int ranks : {1, 2}) {
       FiniteElementSession session(job, testing::workerOptions(ranks));
+      std::vector<FiniteElementResult> answers;
       for (const FiniteElementJob* values : {&job, &secondJob, &job}) {
         const auto start = std::chrono::steady_clock::now();
         const FiniteElementResult served = session.solve(values->fixedDisplacements);
@@ -45,8 +47,14 @@ int FiniteElementSessionTest(int, char*[])
                   << " mm\n";
         BS_CHECK_MSG(difference < 1e-6, difference);
         BS_CHECK(served.convergedReason > 0);
-        BS_CHECK_MSG(served.solveSeconds < session.prepareSeconds(), served.solveSeconds << " vs " << session.prepareSeconds());
+        answers.push_back(served);
       }
+      // One preparation for every solve: the same assembly and setup, the same answer to the same values.
+      for (const FiniteElementResult& a : answers) {
+        BS_CHECK(a.assemblySeconds == answers[0].assemblySeconds && a.setupSeconds == answers[0].setupSeconds);
+      }
+      BS_CHECK(answers[2].displacements == answers[0].displacements);
+      BS_CHECK(answers[2].iterations == answers[0].iterations);
       // A malformed request is refused and the session goes on.
       BS_CHECK_THROWS(session.solve({1.0, 2.0}), std::invalid_argument, "3 values per fixed node");
       BS_CHECK(session.solve(job.fixedDisplacements).convergedReason > 0);
