@@ -3,6 +3,8 @@
 #include "Commands.h"
 #include "LandmarkEvaluation.h"
 
+#include <itkIdentityTransform.h>
+
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -27,7 +29,8 @@ void addEvaluateCommand(CLI::App& app)
   CLI::App* command = app.add_subcommand(
     "evaluate", "Target registration error of an intraop_to_preop transform against landmark pairs (mm)");
   command->add_option("--transform", options->transform,
-                      "ITK transform file (.tfm, .h5, .txt, .mat) or displacement field image (x = y + d(y))")
+                      "ITK transform file (.tfm, .h5, .txt, .mat), displacement field image (x = y + d(y)), or "
+                      "'identity' (no registration: the misalignment and the shift themselves)")
     ->required();
   command->add_option("--landmarks", options->landmarks,
                       "CSV: name,preop_x,preop_y,preop_z,intraop_x,intraop_y,intraop_z (LPS mm)")
@@ -35,7 +38,12 @@ void addEvaluateCommand(CLI::App& app)
   command->add_option("--json", options->json, "also write the result as JSON to this file");
   command->callback([options] {
     const std::vector<LandmarkPair> pairs = readLandmarksCsv(options->landmarks);
-    const SpatialTransform::Pointer transform = readTransform(options->transform);
+    SpatialTransform::Pointer transform;
+    if (options->transform == "identity") {
+      transform = itk::IdentityTransform<double, 3>::New().GetPointer();
+    } else {
+      transform = readTransform(options->transform);
+    }
     const RegistrationError error = evaluateTransform(*transform, pairs);
     std::printf("transform %s (%s)\nlandmarks %s\n", options->transform.c_str(), describeTransform(transform).c_str(),
                 options->landmarks.c_str());

@@ -113,6 +113,10 @@ EvaluateTruth)
   [ "$(json_value "$out/truth.json" "['pairs'][0]['name']")" = "craniotomy-01" ] || fail "first pair is not craniotomy-01"
   pairs=$(($(wc -l < "$case_dir/landmarks.csv") - 1))
   [ "$(json_value "$out/truth.json" "['pairs'].__len__()")" = "$pairs" ] || fail "not every pair is in the JSON"
+  # No registration: the misalignment and the shift themselves.
+  "$brainshift" evaluate --transform identity --landmarks "$case_dir/landmarks.csv" --json "$out/identity.json" >/dev/null \
+    || fail "evaluate of the identity exited $?"
+  float_check "$out/identity.json" "['mean_mm']" "> 8"
   # The rigid part alone: exact on the head, far off under the craniotomy.
   "$brainshift" evaluate --transform "$case_dir/truth/rigid_intraop_to_preop.tfm" --landmarks "$case_dir/landmarks.csv" \
     --json "$out/rigid.json" >/dev/null || fail "evaluate of the rigid part exited $?"
