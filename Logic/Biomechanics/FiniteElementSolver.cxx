@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fcntl.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sstream>
 #include <sys/wait.h>
 #include <thread>
@@ -119,7 +120,6 @@ public:
     error_ = err[0];
     ::fcntl(output_, F_SETFL, O_NONBLOCK);
     ::fcntl(error_, F_SETFL, O_NONBLOCK);
-    ::signal(SIGPIPE, SIG_IGN); // a dead worker shows as a failed write, not a dead caller
   }
 
   ~WorkerProcess()
@@ -131,10 +131,25 @@ public:
     ::close(error_);
   }
 
+  /// A dead worker shows as a failed write, not as a SIGPIPE that kills the caller: the signal is
+  /// blocked in this thread for the write and a pending one consumed, leaving the process's
+  /// signal handling (the host's) as it was.
   void writeLine(const std::string& line)
   {
     const std::string text = line + "\n";
-    if (::write(input_, text.data(), text.size()) != ssize_t(text.size())) {
+    sigset_t pipe, previous;
+    sigemptyset(&pipe);
+    sigaddset(&pipe, SIGPIPE);
+    ::pthread_sigmask(SIG_BLOCK, &pipe, &previous);
+    const ssize_t written = ::write(input_, text.data(), text.size());
+    const int error = errno;
+    if (written < 0 && error == EPIPE) {
+      const timespec immediately{0, 0};
+      while (::sigtimedwait(&pipe, nullptr, &immediately) == SIGPIPE) {
+      }
+    }
+    ::pthread_sigmask(SIG_SETMASK, &previous, nullptr);
+    if (written != ssize_t(text.size())) {
       throw MethodError("the finite element worker is gone" + stderrSummary());
     }
   }

@@ -5,7 +5,11 @@
 #include "BrainShiftTestingSupport.h"
 #include "FiniteElementTestSupport.h"
 
+#include "BrainShiftErrors.h"
+
 #include <chrono>
+#include <cstdlib>
+#include <thread>
 #include <iostream>
 
 int FiniteElementSessionTest(int, char*[])
@@ -59,5 +63,12 @@ int FiniteElementSessionTest(int, char*[])
       BS_CHECK_THROWS(session.solve({1.0, 2.0}), std::invalid_argument, "3 values per fixed node");
       BS_CHECK(session.solve(job.fixedDisplacements).convergedReason > 0);
     }
+
+    // A served worker that dies between scans is reported, and the caller survives (no SIGPIPE).
+    // Only this test serves workers, so the kill touches no other test's process.
+    FiniteElementSession doomed(job, testing::workerOptions(1));
+    BS_CHECK(std::system("pkill -KILL -f '[b]rainshift-fe-worker --serve' >/dev/null 2>&1") == 0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    BS_CHECK_THROWS(doomed.solve(job.fixedDisplacements), MethodError, "finite element worker");
   });
 }

@@ -133,8 +133,6 @@ int LabelMapMesherTest(int, char*[])
     parameters.resolutionMm = 2.0;
     parameters.labels = {2, 7};
     BS_CHECK_THROWS(meshLabelMap(*labels, parameters), InputError, "tissue label 7 is not in the label map");
-    auto empty = LabelImage::New();
-    empty->Graft(labels);
     auto zeros = LabelImage::New();
     zeros->CopyInformation(labels);
     zeros->SetRegions(labels->GetLargestPossibleRegion());

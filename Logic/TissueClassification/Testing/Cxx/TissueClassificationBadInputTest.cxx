@@ -18,8 +18,6 @@ int TissueClassificationBadInputTest(int, char*[])
       classifyTissues(intraop, *c.simulated.preopLabels, *c.rigid, std::nullopt, parameters);
 
     // Labels without parenchyma.
-    auto noParenchyma = LabelImage::New();
-    noParenchyma->Graft(c.simulated.preopLabels);
     auto copy = LabelImage::New();
     copy->CopyInformation(c.simulated.preopLabels);
     copy->SetRegions(c.simulated.preopLabels->GetLargestPossibleRegion());
