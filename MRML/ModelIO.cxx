@@ -4,6 +4,8 @@
 #include "FileNames.h"
 #include "BrainShiftErrors.h"
 
+#include <vtkCallbackCommand.h>
+#include <vtkCommand.h>
 #include <vtkDataSetReader.h>
 #include <vtkFieldData.h>
 #include <vtkPointData.h>
@@ -79,8 +81,17 @@ vtkSmartPointer<vtkPointSet> readModel(const fs::path& path)
       throw InputError(path.string() + ": not a VTK XML " + (ext == ".vtp" ? "polydata" : "unstructured grid") + " file");
     }
     reader->SetFileName(path.c_str());
+    // VTK prints its parser's complaints to the console; the caller gets one error instead.
+    bool failed = false;
+    vtkNew<vtkCallbackCommand> onError;
+    onError->SetClientData(&failed);
+    onError->SetCallback([](vtkObject*, unsigned long, void* flag, void*) { *static_cast<bool*>(flag) = true; });
+    reader->AddObserver(vtkCommand::ErrorEvent, onError);
+    const int display = vtkObject::GetGlobalWarningDisplay();
+    vtkObject::GlobalWarningDisplayOff();
     reader->Update();
-    if (reader->GetErrorCode() != 0) {
+    vtkObject::SetGlobalWarningDisplay(display);
+    if (failed || reader->GetErrorCode() != 0) {
       throw InputError(path.string() + ": cannot read the model (truncated or corrupt?)");
     }
     model = vtkPointSet::SafeDownCast(reader->GetOutputDataObject(0));

@@ -432,6 +432,8 @@ void runSimulateBench(const SimulateBenchOptions& o)
 
 } // namespace
 
+void addSurfaceBench(CLI::App* bench); // BenchSurface.cxx
+
 void addBenchCommand(CLI::App& app)
 {
   CLI::App* bench = app.add_subcommand("bench", "Speed and accuracy measurements against the built-in case's truth "
@@ -459,6 +461,8 @@ void addBenchCommand(CLI::App& app)
   classifyCommand->add_option("--bias", classify->bias, "bias field strengths")->delimiter(',')->capture_default_str();
   classifyCommand->add_option("--runs", classify->runs, "timed runs on the default case")->capture_default_str();
   classifyCommand->add_option("--seed", classify->seed, "seed of the cases")->capture_default_str();
+  addSurfaceBench(bench);
+
   auto simulate = std::make_shared<SimulateBenchOptions>();
   CLI::App* simulateCommand = bench->add_subcommand(
     "simulate", "Finite element solve: time against size for the candidate solvers, 1 and 2 ranks, prepared and solved");

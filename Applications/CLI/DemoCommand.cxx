@@ -2,6 +2,8 @@
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
 #include "LabelOverlap.h"
+#include "ModelIO.h"
+#include "SurfaceDisplacementEvaluation.h"
 #include "LandmarkEvaluation.h"
 #include "VolumeIO.h"
 #include "RunCommands.h"
@@ -198,6 +200,32 @@ void addDemoCommand(CLI::App& app)
       const json& c = evaluation["classification"];
       std::printf("classification: brain Dice %.3f, ventricles %.3f, brain surface distance %.2f mm\n",
                   c["brain_dice"].get<double>(), c["ventricle_dice"].get<double>(), c["brain_surface_distance_mm"].get<double>());
+    }
+    if (fs::exists(out / "brain_surface.vtp", ec) && fs::exists(out / "rigid_intraop_to_preop.tfm", ec)) {
+      // The surface's displacements against the truth, in the model frame of the rigid result used.
+      vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(out / "brain_surface.vtp"));
+      const SpatialTransform::Pointer rigid = readTransform(out / "rigid_intraop_to_preop.tfm");
+      if (surface) {
+        const SurfaceDisplacementAccuracy a =
+          evaluateSurfaceDisplacement(surface, *simulated.intraopToPreop, *rigid, *simulated.preopLabels);
+        evaluation["surface"] = {{"imposed_nodes", a.nodes},
+                                 {"mean_error_mm", a.meanErrorMm},
+                                 {"median_error_mm", a.medianErrorMm},
+                                 {"p95_error_mm", a.p95ErrorMm},
+                                 {"max_error_mm", a.maxErrorMm},
+                                 {"true_mean_displacement_mm", a.meanTrueDisplacementMm},
+                                 {"true_max_displacement_mm", a.maxTrueDisplacementMm},
+                                 {"moving_nodes", a.movingNodes},
+                                 {"moving_mean_error_mm", a.movingMeanErrorMm},
+                                 {"moving_p95_error_mm", a.movingP95ErrorMm},
+                                 {"moving_true_mean_displacement_mm", a.movingMeanTrueDisplacementMm},
+                                 {"residual_to_true_boundary_mm", a.meanResidualMm},
+                                 {"p95_residual_to_true_boundary_mm", a.p95ResidualMm}};
+        std::printf("surface: displacement error mean %.2f mm, p95 %.2f mm (true mean %.2f, max %.2f mm); "
+                    "where it moves > 2 mm: %.2f mm of %.2f mm; residual to the true boundary %.2f mm\n",
+                    a.meanErrorMm, a.p95ErrorMm, a.meanTrueDisplacementMm, a.maxTrueDisplacementMm, a.movingMeanErrorMm,
+                    a.movingMeanTrueDisplacementMm, a.meanResidualMm);
+      }
     }
     writeTextFileAtomically(out / "evaluation.json", evaluation.dump(2) + "\n");
     report.save();

@@ -116,7 +116,8 @@ const std::vector<PipelineStage>& pipelineStages()
     {"classify", "intraoperative tissue classification, k-NN with spatial context (writes intraop_labels.nii.gz)",
      runClassifyStage},
     {"mesh", "tetrahedral mesh of the preoperative label map (writes mesh.vtu)", runMeshStage},
-    {"surface", "active surface matching the brain boundary (writes brain_surface.vtp)", nullptr},
+    {"surface", "active surface carrying the preoperative brain surface onto the intraoperative brain "
+                "(writes brain_surface.vtp)", runSurfaceStage},
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
      runSimulateStage},
     {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "

@@ -70,5 +70,6 @@ void runRigidStage(RunContext& context);
 void runClassifyStage(RunContext& context);
 void runSimulateStage(RunContext& context);
 void runMeshStage(RunContext& context);
+void runSurfaceStage(RunContext& context);
 
 } // namespace brainshift::cli

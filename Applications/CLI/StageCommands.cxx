@@ -41,7 +41,7 @@ StageFlags flagsOf(const std::string& stage)
   if (stage == "rigid") return {PreopImage | IntraopImage, PreopImage | IntraopImage | PreopLabels, false, false};
   if (stage == "classify") return {PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage, false, false};
   if (stage == "mesh") return {PreopLabels, PreopLabels, false, true};
-  if (stage == "surface") return {IntraopImage, IntraopImage, false, false};
+  if (stage == "surface") return {PreopLabels | IntraopImage, PreopLabels | IntraopImage, false, false};
   if (stage == "simulate") return {0, 0, true, false};
   return {PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays, false, false};
 }

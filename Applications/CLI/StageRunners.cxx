@@ -1,5 +1,6 @@
 // The stages as the command line runs them: inputs from the run context, the stage's logic, its
 // files in the output folder, its entry in report.json.
+#include "ActiveSurfaceLogic.h"
 #include "BiomechanicalModel.h"
 #include "BrainShiftErrors.h"
 #include "FiniteElementSolver.h"
@@ -173,6 +174,70 @@ void runMeshStage(RunContext& context)
   context.report().addWarnings(result.warnings);
   std::printf("  mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
               q.minimumDihedralDegrees, q.maximumDihedralDegrees, clock.seconds());
+}
+
+} // namespace brainshift::cli
+
+namespace brainshift::cli {
+
+void runSurfaceStage(RunContext& context)
+{
+  Stopwatch clock;
+  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm"),
+                 labelsFile = context.output("intraop_labels.nii.gz");
+  for (const fs::path& needed : {meshFile, rigidFile, labelsFile}) {
+    std::error_code ec;
+    if (!fs::exists(needed, ec)) {
+      throw InputError(needed.string() + ": not found; run `brainshift " +
+                       std::string(needed == meshFile ? "mesh" : needed == rigidFile ? "rigid" : "classify") +
+                       "` on this output folder first");
+    }
+  }
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  const LabelImage::Pointer labels = readLabelVolume(labelsFile);
+  const Configuration& configuration = context.configuration();
+  ActiveSurfaceParameters parameters;
+  parameters.membraneWeight = configuration.surfaceMembraneWeight;
+  parameters.bendingWeight = configuration.surfaceBendingWeight;
+  parameters.imageWeight = configuration.surfaceImageWeight;
+  parameters.maximumIterations = configuration.surfaceMaximumIterations;
+  ActiveSurfaceInputNames names;
+  names.mesh = meshFile.string();
+  names.labels = labelsFile.string();
+  names.rigid = rigidFile.string();
+  names.preopLabels = context.options().preopLabels.string();
+  const ActiveSurfaceResult result = deformBrainSurface(mesh, &context.preopLabels("surface"), *labels,
+                                                        &context.intraopImage("surface"), *rigid, parameters, names);
+  writeModel(result.surface, context.output("brain_surface.vtp"));
+  context.report().setStage("surface", {{"wall_seconds", clock.seconds()},
+                                        {"surface_nodes", result.surfaceNodes},
+                                        {"imposed_nodes", result.imposedNodes},
+                                        {"free_nodes", {{"resected_tumour", result.freeResected},
+                                                        {"outside_image", result.freeOutsideImage},
+                                                        {"unmatched", result.freeUnmatched}}},
+                                        {"iterations", result.iterations},
+                                        {"converged", result.converged},
+                                        {"initial_mean_residual_mm", result.initialMeanResidualMm},
+                                        {"mean_residual_mm", result.meanResidualMm},
+                                        {"p95_residual_mm", result.p95ResidualMm},
+                                        {"max_residual_mm", result.maxResidualMm},
+                                        {"mean_displacement_mm", result.meanDisplacementMm},
+                                        {"max_displacement_mm", result.maxDisplacementMm},
+                                        {"image_term_nodes", result.imageTermNodes},
+                                        {"expected_intensity_inside", result.expectedInsideIntensity},
+                                        {"expected_intensity_outside", result.expectedOutsideIntensity},
+                                        {"tumour_resected", result.tumourResected},
+                                        {"flipped_triangles", result.flippedTriangles},
+                                        {"preop_boundary_seconds", result.preopBoundarySeconds},
+                                        {"target_seconds", result.targetSeconds},
+                                        {"iteration_seconds", result.iterationSeconds}});
+  context.report().addWarnings(result.warnings);
+  std::printf("  surface: %zu nodes (%zu imposed), %u iterations, residual %.2f mm mean (from %.2f), displacement up to %.1f mm, %.2f s\n",
+              result.surfaceNodes, result.imposedNodes, result.iterations, result.meanResidualMm, result.initialMeanResidualMm,
+              result.maxDisplacementMm, clock.seconds());
 }
 
 } // namespace brainshift::cli

@@ -42,7 +42,7 @@ Configuration Configuration::load(const fs::path& path)
   }
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
-  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "classification"}, file);
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "classification", "surface"}, file);
   if (document.contains("materials")) {
     const json& materials = document["materials"];
     if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
@@ -101,6 +101,20 @@ Configuration Configuration::load(const fs::path& path)
       configuration.classificationBiasCorrection = c["bias_correction"].get<bool>();
     }
   }
+  if (document.contains("surface")) {
+    const json& c = document["surface"];
+    if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
+    requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations"}, file + ": surface");
+    if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");
+    if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
+    if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");
+    if (c.contains("max_iterations")) {
+      if (!c["max_iterations"].is_number_integer() || c["max_iterations"].get<long>() < 1) {
+        throw InputError(file + ": surface.max_iterations must be a whole number >= 1");
+      }
+      configuration.surfaceMaximumIterations = c["max_iterations"].get<unsigned>();
+    }
+  }
   if (document.contains("ranks")) {
     if (!document["ranks"].is_number_integer()) throw InputError(file + ": ranks must be a whole number");
     configuration.ranks = document["ranks"].get<int>();
@@ -134,6 +148,16 @@ void Configuration::validate(const std::string& source) const
   }
   if (!std::isfinite(classificationSaturationMm) || classificationSaturationMm <= 0 || classificationSaturationMm > 100) {
     throw InputError(source + ": classification saturation " + std::to_string(classificationSaturationMm) + " mm is outside 0 to 100 mm");
+  }
+  if (!std::isfinite(surfaceMembraneWeight) || surfaceMembraneWeight < 0 || surfaceMembraneWeight > 1000 ||
+      !std::isfinite(surfaceBendingWeight) || surfaceBendingWeight < 0 || surfaceBendingWeight > 1000) {
+    throw InputError(source + ": surface membrane and bending weights must be within 0 to 1000");
+  }
+  if (!std::isfinite(surfaceImageWeight) || surfaceImageWeight < 0 || surfaceImageWeight > 1) {
+    throw InputError(source + ": surface image weight " + std::to_string(surfaceImageWeight) + " is outside 0 to 1");
+  }
+  if (surfaceMaximumIterations < 1 || surfaceMaximumIterations > 100000) {
+    throw InputError(source + ": surface max_iterations " + std::to_string(surfaceMaximumIterations) + " is outside 1 to 100000");
   }
   if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
 }

@@ -25,6 +25,12 @@ struct Configuration {
   unsigned classificationK = 7;
   double classificationSaturationMm = 10.0;
   bool classificationBiasCorrection = false;
+  /// Active surface: elastic weights of the displacement (membrane, bending), the image term's
+  /// share, the iteration limit.
+  double surfaceMembraneWeight = 1.0;
+  double surfaceBendingWeight = 0.2;
+  double surfaceImageWeight = 0.0;
+  unsigned surfaceMaximumIterations = 200;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.5), a non-positive modulus, and the like.

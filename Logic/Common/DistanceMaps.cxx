@@ -18,4 +18,22 @@ ScalarImage::Pointer signedDistanceMm(const MaskImage* mask)
   return out;
 }
 
+ScalarImage::Pointer boundaryDistanceMm(const MaskImage* mask)
+{
+  auto complement = MaskImage::New();
+  complement->SetRegions(mask->GetLargestPossibleRegion());
+  complement->CopyInformation(mask);
+  complement->Allocate();
+  const unsigned char* m = mask->GetBufferPointer();
+  unsigned char* c = complement->GetBufferPointer();
+  const std::size_t n = mask->GetLargestPossibleRegion().GetNumberOfPixels();
+  for (std::size_t i = 0; i < n; ++i) c[i] = m[i] ? 0 : 1;
+  ScalarImage::Pointer inside = signedDistanceMm(mask);
+  const ScalarImage::Pointer outside = signedDistanceMm(complement);
+  float* a = inside->GetBufferPointer();
+  const float* b = outside->GetBufferPointer();
+  for (std::size_t i = 0; i < n; ++i) a[i] = 0.5f * (a[i] - b[i]);
+  return inside;
+}
+
 } // namespace brainshift

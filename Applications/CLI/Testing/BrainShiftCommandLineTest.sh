@@ -177,7 +177,6 @@ StagesNotAvailableYet)
   out=$work/stages-not-yet
   expect 1 "not available yet" -- "$brainshift" warp --preop-image "$case_dir/preop_image.nii.gz" \
     --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
-  expect 1 "not available yet" -- "$brainshift" surface --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out"
   expect 2 "" -- "$brainshift" bench
   # Bad input is still bad input when the stage is missing.
   expect 2 "no such file" -- "$brainshift" warp --preop-image "$out/none.nii.gz" \
@@ -262,6 +261,57 @@ MeshStage)
     --config "$out/nine.json"
   ;;
 
+SurfaceStage)
+  out=$work/surface-stage
+  rm -rf "$out" && mkdir -p "$out"
+  L=$case_dir/preop_labels.nii.gz I=$case_dir/intraop_image.nii.gz
+  expect 2 "mesh.vtu: not found; run \`brainshift mesh\`" -- "$brainshift" surface --preop-labels "$L" --intraop-image "$I" \
+    --output-dir "$out"
+  cp "$demo/mesh.vtu" "$demo/rigid_intraop_to_preop.tfm" "$demo/intraop_labels.nii.gz" "$out/"
+  before=$(checksums "$out" "$case_dir")
+  "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out" >/dev/null || fail "surface exited $?"
+  [ "$before" = "$(checksums "$out/mesh.vtu" "$out/rigid_intraop_to_preop.tfm" "$out/intraop_labels.nii.gz" "$case_dir")" ] ||
+    fail "surface modified its inputs"
+  for array in Displacement DisplacementMagnitude MeshNodeId Imposed; do
+    grep -q "Name=\"$array\"" "$out/brain_surface.vtp" || fail "brain_surface.vtp lacks the point array $array"
+  done
+  for key in wall_seconds surface_nodes imposed_nodes mean_residual_mm iterations converged free_nodes; do
+    json_value "$out/report.json" "['stages']['surface']['$key']" >/dev/null || fail "report.json lacks surface.$key"
+  done
+  float_check "$out/report.json" "['stages']['surface']['mean_residual_mm']" "< 1.0"
+  float_check "$out/report.json" "['stages']['surface']['max_displacement_mm']" "> 3"
+  # The truth's labels as the target: the displacements follow the true shift.
+  cp "$case_dir/truth/intraop_labels.nii.gz" "$out/intraop_labels.nii.gz"
+  "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out" >/dev/null || fail "surface exited $?"
+  cp "$out/brain_surface.vtp" "$out/first.vtp"
+  "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out" >/dev/null || fail "surface exited $?"
+  cmp -s "$out/brain_surface.vtp" "$out/first.vtp" || fail "surface is not deterministic"
+  # Bad input: an intraoperative segmentation without brain, a corrupt mesh, a missing classification.
+  python3 - "$case_dir/intraop_image.nii.gz" "$out/empty_labels.nii.gz" <<'PY'
+import gzip, struct, sys
+# The intraoperative image's header (its grid), as unsigned 16-bit zeros: a segmentation without brain.
+raw = gzip.open(sys.argv[1], 'rb').read()
+hdr = bytearray(raw[:348])
+dims = struct.unpack_from('<8h', hdr, 40)
+offset = int(struct.unpack_from('<f', hdr, 108)[0])
+struct.pack_into('<h', hdr, 70, 512)  # uint16
+struct.pack_into('<h', hdr, 72, 16)
+struct.pack_into('<2f', hdr, 112, 1.0, 0.0)  # scl_slope, scl_inter
+count = dims[1] * dims[2] * dims[3]
+with gzip.open(sys.argv[2], 'wb') as f:
+    f.write(bytes(hdr) + raw[348:offset] + b'\0' * (2 * count))
+PY
+  mkdir -p "$out/empty" && cp "$out/mesh.vtu" "$out/rigid_intraop_to_preop.tfm" "$out/empty/"
+  cp "$out/empty_labels.nii.gz" "$out/empty/intraop_labels.nii.gz"
+  expect 2 "holds no brain" -- "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out/empty"
+  [ -e "$out/empty/brain_surface.vtp" ] && fail "a surface was written for an empty segmentation"
+  mkdir -p "$out/corrupt" && cp "$out/rigid_intraop_to_preop.tfm" "$out/intraop_labels.nii.gz" "$out/corrupt/"
+  head -c 2000 "$out/mesh.vtu" > "$out/corrupt/mesh.vtu"
+  expect 2 "corrupt/mesh.vtu: the model has no points" -- "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out/corrupt"
+  rm "$out/intraop_labels.nii.gz"
+  expect 2 "run \`brainshift classify\`" -- "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out"
+  ;;
+
 SimulateStage)
   source_case=$(dirname "$work")/SimulateStageCase
   out=$work/simulate-stage
@@ -301,6 +351,10 @@ DemoEndToEnd)
   [ -s "$demo/mesh.vtu" ] || fail "the demo's register did not run the mesh stage"
   float_check "$demo/evaluation.json" "['classification']['brain_dice']" ">= 0.95"
   float_check "$demo/evaluation.json" "['classification']['brain_surface_distance_mm']" "<= 1.0"
+  [ -s "$demo/brain_surface.vtp" ] || fail "the demo's register did not run the surface stage"
+  grep -q 'Name="Displacement"' "$demo/mesh.vtu" || fail "the demo's register did not run the simulate stage"
+  float_check "$demo/evaluation.json" "['surface']['mean_error_mm']" "< 1.5"
+  float_check "$demo/evaluation.json" "['surface']['moving_mean_error_mm']" "< 0.5 * $(json_value "$demo/evaluation.json" "['surface']['moving_true_mean_displacement_mm']")"
   ;;
 
 *)

@@ -1,0 +1,834 @@
+#include "ActiveSurfaceLogic.h"
+
+#include "DistanceMaps.h"
+#include "LabelMapMesher.h"
+
+#include <itkRegionOfInterestImageFilter.h>
+#include <itkSmoothingRecursiveGaussianImageFilter.h>
+
+// ITK brings its own Eigen; a second copy in the same translation unit clashes.
+#include <itk_eigen.h>
+#include ITK_EIGEN(Dense)
+#include ITK_EIGEN(Sparse)
+#include ITK_EIGEN(SparseCholesky)
+
+#include <vtkCellArray.h>
+#include <vtkCellData.h>
+#include <vtkDoubleArray.h>
+#include <vtkIdList.h>
+#include <vtkIntArray.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace brainshift {
+
+namespace {
+using Vec = Eigen::Vector3d;
+
+/// The distance maps cover the surface's box and this much around it: more than the brain can
+/// shift for the intraoperative target; a lattice step and the smoothing for the preoperative one.
+constexpr double CropMarginMm = 25.0, PreopCropMarginMm = 10.0;
+
+double secondsSince(std::chrono::steady_clock::time_point start)
+{
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// Preoperative (model frame) point -> continuous index of the intraoperative grid: the inverse
+/// of the rigid intraop -> preop transform, then the grid's physical -> index map.
+struct PreopToIntraopIndex {
+  Eigen::Matrix3d matrix;
+  Vec offset;
+  Vec operator()(const Vec& x) const { return matrix * x + offset; }
+  /// A gradient taken in index space, brought to the model frame.
+  Vec gradientToPreop(const Vec& indexGradient) const { return matrix.transpose() * indexGradient; }
+};
+
+PreopToIntraopIndex preopToIntraopIndex(const SpatialTransform& rigid, const ImageGeometry& grid)
+{
+  const AffineParameters a = affineParametersOf(&rigid);
+  Eigen::Matrix3d A, D = Eigen::Matrix3d::Zero(), S = Eigen::Matrix3d::Zero();
+  Vec t, o;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      A(i, j) = a.matrix[i][j];
+      D(i, j) = grid.direction[unsigned(i)][unsigned(j)];
+    }
+    t[i] = a.translation[i];
+    o[i] = grid.origin[unsigned(i)];
+    S(i, i) = grid.spacing[unsigned(i)];
+  }
+  const Eigen::Matrix3d physicalToIndex = (D * S).inverse();
+  const Eigen::Matrix3d preopToIntraop = A.inverse();
+  PreopToIntraopIndex map;
+  map.matrix = physicalToIndex * preopToIntraop;
+  map.offset = physicalToIndex * (-preopToIntraop * t - o);
+  return map;
+}
+
+/// Trilinear samples (and index-space gradients) of a float volume.
+class TrilinearVolume {
+public:
+  explicit TrilinearVolume(const ScalarImage& image)
+    : data_(image.GetBufferPointer())
+  {
+    const auto size = image.GetLargestPossibleRegion().GetSize();
+    for (int d = 0; d < 3; ++d) size_[d] = long(size[unsigned(d)]);
+  }
+
+  static bool insideGrid(const Vec& index, const ImageGeometry& grid)
+  {
+    for (unsigned d = 0; d < 3; ++d) {
+      if (!(index[int(d)] >= -0.5 && index[int(d)] <= double(grid.size[d]) - 0.5)) return false;
+    }
+    return true;
+  }
+
+  /// Within half a voxel of the grid.
+  bool inside(const Vec& index) const
+  {
+    for (int d = 0; d < 3; ++d) {
+      if (!(index[d] >= -0.5 && index[d] <= double(size_[d]) - 0.5)) return false;
+    }
+    return true;
+  }
+
+  double value(const Vec& index, Vec* gradient = nullptr) const
+  {
+    long i0[3];
+    double f[3];
+    for (int d = 0; d < 3; ++d) {
+      const double c = std::clamp(index[d], 0.0, double(size_[d] - 1));
+      i0[d] = std::min(long(std::floor(c)), std::max(size_[d] - 2, 0L));
+      f[d] = size_[d] > 1 ? c - double(i0[d]) : 0.0;
+    }
+    auto at = [&](int dx, int dy, int dz) {
+      const long x = std::min(i0[0] + dx, size_[0] - 1), y = std::min(i0[1] + dy, size_[1] - 1), z = std::min(i0[2] + dz, size_[2] - 1);
+      return double(data_[x + size_[0] * (y + size_[1] * z)]);
+    };
+    const double c000 = at(0, 0, 0), c100 = at(1, 0, 0), c010 = at(0, 1, 0), c110 = at(1, 1, 0);
+    const double c001 = at(0, 0, 1), c101 = at(1, 0, 1), c011 = at(0, 1, 1), c111 = at(1, 1, 1);
+    const double c00 = c000 + f[0] * (c100 - c000), c10 = c010 + f[0] * (c110 - c010);
+    const double c01 = c001 + f[0] * (c101 - c001), c11 = c011 + f[0] * (c111 - c011);
+    const double c0 = c00 + f[1] * (c10 - c00), c1 = c01 + f[1] * (c11 - c01);
+    if (gradient) {
+      const double gx0 = (1 - f[1]) * (c100 - c000) + f[1] * (c110 - c010);
+      const double gx1 = (1 - f[1]) * (c101 - c001) + f[1] * (c111 - c011);
+      (*gradient)[0] = (1 - f[2]) * gx0 + f[2] * gx1;
+      (*gradient)[1] = (1 - f[2]) * (c10 - c00) + f[2] * (c11 - c01);
+      (*gradient)[2] = c1 - c0;
+    }
+    return c0 + f[2] * (c1 - c0);
+  }
+
+private:
+  const float* data_;
+  long size_[3];
+};
+
+/// The target: the intraoperative brain as one solid (the largest 6-connected component of the
+/// brain labels, its enclosed holes such as a resection cavity filled).
+MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>& brain, const std::string& labelsName,
+                                   Warnings& warnings)
+{
+  const auto size = labels.GetLargestPossibleRegion().GetSize();
+  const long nx = long(size[0]), ny = long(size[1]), nz = long(size[2]);
+  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
+  const LabelPixel* l = labels.GetBufferPointer();
+  std::vector<unsigned char> inBrain(n, 0);
+  std::size_t brainVoxels = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (brain.count(l[i])) {
+      inBrain[i] = 1;
+      ++brainVoxels;
+    }
+  }
+  if (brainVoxels == 0) throw InputError(labelsName + ": the intraoperative segmentation holds no brain (labels 2-4)");
+  auto neighbours = [&](std::size_t i, auto&& visit) {
+    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
+    if (x > 0) visit(i - 1);
+    if (x + 1 < nx) visit(i + 1);
+    if (y > 0) visit(i - std::size_t(nx));
+    if (y + 1 < ny) visit(i + std::size_t(nx));
+    if (z > 0) visit(i - std::size_t(nx * ny));
+    if (z + 1 < nz) visit(i + std::size_t(nx * ny));
+  };
+  // Components of the brain, in voxel order (deterministic); keep the largest.
+  std::vector<int> component(n, 0);
+  std::vector<std::size_t> componentSize{0};
+  std::vector<std::size_t> queue;
+  for (std::size_t seed = 0; seed < n; ++seed) {
+    if (!inBrain[seed] || component[seed]) continue;
+    const int id = int(componentSize.size());
+    componentSize.push_back(0);
+    queue.assign(1, seed);
+    component[seed] = id;
+    while (!queue.empty()) {
+      const std::size_t i = queue.back();
+      queue.pop_back();
+      ++componentSize[std::size_t(id)];
+      neighbours(i, [&](std::size_t j) {
+        if (inBrain[j] && !component[j]) {
+          component[j] = id;
+          queue.push_back(j);
+        }
+      });
+    }
+  }
+  const int largest = int(std::max_element(componentSize.begin(), componentSize.end()) - componentSize.begin());
+  const double keptFraction = double(componentSize[std::size_t(largest)]) / double(brainVoxels);
+  std::size_t secondLargest = 0;
+  for (std::size_t c = 1; c < componentSize.size(); ++c) {
+    if (int(c) != largest) secondLargest = std::max(secondLargest, componentSize[c]);
+  }
+  if (double(secondLargest) > 0.2 * double(brainVoxels)) {
+    std::ostringstream m;
+    m << labelsName << ": the intraoperative brain is disjoint (its largest connected part holds "
+      << int(std::lround(100 * keptFraction)) << " % of it, the next " << int(std::lround(100.0 * double(secondLargest) / double(brainVoxels)))
+      << " %); no single brain surface to match";
+    throw InputError(m.str());
+  }
+  if (keptFraction < 0.99) {
+    std::ostringstream w;
+    w << "surface: " << int(std::lround(100 * (1 - keptFraction)))
+      << " % of the intraoperative brain is in pieces apart from the brain; they are ignored";
+    warnings.push_back(w.str());
+  }
+  // Fill what the outside cannot reach: the cavity, enclosed holes.
+  std::vector<unsigned char> outside(n, 0);
+  queue.clear();
+  for (std::size_t i = 0; i < n; ++i) {
+    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
+    const bool border = x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+    if (border && component[i] != largest) {
+      outside[i] = 1;
+      queue.push_back(i);
+    }
+  }
+  while (!queue.empty()) {
+    const std::size_t i = queue.back();
+    queue.pop_back();
+    neighbours(i, [&](std::size_t j) {
+      if (!outside[j] && component[j] != largest) {
+        outside[j] = 1;
+        queue.push_back(j);
+      }
+    });
+  }
+  auto mask = MaskImage::New();
+  mask->SetRegions(labels.GetLargestPossibleRegion());
+  mask->CopyInformation(&labels);
+  mask->Allocate();
+  unsigned char* m = mask->GetBufferPointer();
+  for (std::size_t i = 0; i < n; ++i) m[i] = outside[i] ? 0 : 1;
+  return mask;
+}
+
+ScalarImage::Pointer smoothed(const ScalarImage::Pointer& image, double sigmaMm)
+{
+  if (sigmaMm <= 0) return image;
+  using Smoother = itk::SmoothingRecursiveGaussianImageFilter<ScalarImage, ScalarImage>;
+  auto smoother = Smoother::New();
+  smoother->SetInput(image);
+  Smoother::SigmaArrayType sigma;
+  // The recursive filter needs about half a voxel of sigma to stay accurate.
+  for (unsigned d = 0; d < 3; ++d) sigma[d] = std::max(sigmaMm, 0.5 * image->GetSpacing()[d]);
+  smoother->SetSigmaArray(sigma);
+  smoother->Update();
+  ScalarImage::Pointer out = smoother->GetOutput();
+  out->DisconnectPipeline();
+  return out;
+}
+
+double median(std::vector<double> values)
+{
+  if (values.empty()) return 0;
+  auto middle = values.begin() + std::ptrdiff_t(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
+
+double percentile(std::vector<double> values, double p)
+{
+  if (values.empty()) return 0;
+  std::sort(values.begin(), values.end());
+  const double rank = p * double(values.size() - 1);
+  const std::size_t below = std::size_t(std::floor(rank));
+  const std::size_t above = std::min(values.size() - 1, below + 1);
+  return values[below] + (rank - double(below)) * (values[above] - values[below]);
+}
+
+struct SurfaceTopology {
+  std::vector<std::array<vtkIdType, 3>> triangles;
+  std::vector<std::pair<int, int>> edges;
+};
+
+SurfaceTopology topologyOf(vtkPolyData* surface, const std::string& meshName)
+{
+  SurfaceTopology topology;
+  std::map<std::pair<vtkIdType, vtkIdType>, int> edgeUse;
+  vtkCellArray* polys = surface->GetPolys();
+  vtkNew<vtkIdList> ids;
+  for (polys->InitTraversal(); polys->GetNextCell(ids);) {
+    std::array<vtkIdType, 3> t{ids->GetId(0), ids->GetId(1), ids->GetId(2)};
+    topology.triangles.push_back(t);
+    for (int e = 0; e < 3; ++e) edgeUse[{std::min(t[std::size_t(e)], t[std::size_t((e + 1) % 3)]), std::max(t[std::size_t(e)], t[std::size_t((e + 1) % 3)])}] += 1;
+  }
+  std::size_t bad = 0;
+  for (const auto& [edge, uses] : edgeUse) {
+    if (uses != 2) ++bad;
+    topology.edges.emplace_back(int(edge.first), int(edge.second));
+  }
+  if (bad > 0) {
+    throw InputError(meshName + ": the brain surface of the mesh is not a closed manifold (" + std::to_string(bad) +
+                     " edges not shared by exactly two triangles)");
+  }
+  return topology;
+}
+
+/// Taubin's lambda|mu smoothing (lambda 0.5, mu -0.53) with the umbrella operator of `laplacian`.
+Eigen::MatrixXd taubinSmoothed(Eigen::MatrixXd positions, const Eigen::SparseMatrix<double>& laplacian, unsigned iterations)
+{
+  const Eigen::VectorXd degree = laplacian.diagonal();
+  for (unsigned k = 0; k < iterations; ++k) {
+    for (double factor : {0.5, -0.53}) {
+      // umbrella(x)_i = mean of the neighbours - x_i = -(K x)_i / degree_i
+      const Eigen::MatrixXd umbrella = -(degree.cwiseInverse().asDiagonal() * (laplacian * positions));
+      positions += factor * umbrella;
+    }
+  }
+  return positions;
+}
+
+Vec triangleNormal(const std::vector<Vec>& x, const std::array<vtkIdType, 3>& t)
+{
+  return (x[std::size_t(t[1])] - x[std::size_t(t[0])]).cross(x[std::size_t(t[2])] - x[std::size_t(t[0])]);
+}
+
+
+/// The voxels of `grid` within `marginMm` of the points (given as continuous indices), clamped to it.
+itk::ImageRegion<3> regionAround(const ImageGeometry& grid, const std::vector<Vec>& indices, double marginMm)
+{
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (const Vec& c : indices) {
+    for (int d = 0; d < 3; ++d) {
+      lo[d] = std::min(lo[d], c[d]);
+      hi[d] = std::max(hi[d], c[d]);
+    }
+  }
+  itk::ImageRegion<3> region;
+  for (unsigned d = 0; d < 3; ++d) {
+    const double margin = marginMm / grid.spacing[d];
+    const long first = std::clamp(long(std::floor(lo[d] - margin)), 0L, long(grid.size[d]) - 1);
+    const long last = std::clamp(long(std::ceil(hi[d] + margin)), first, long(grid.size[d]) - 1);
+    region.SetIndex(d, first);
+    region.SetSize(d, std::size_t(last - first + 1));
+  }
+  return region;
+}
+
+template <class TImage>
+typename TImage::Pointer cropped(const TImage& image, const itk::ImageRegion<3>& region)
+{
+  auto crop = itk::RegionOfInterestImageFilter<TImage, TImage>::New();
+  crop->SetInput(&image);
+  crop->SetRegionOfInterest(region);
+  crop->Update();
+  typename TImage::Pointer out = crop->GetOutput();
+  out->DisconnectPipeline();
+  return out;
+}
+
+double mean(const std::vector<double>& values)
+{
+  double sum = 0;
+  for (double v : values) sum += v;
+  return values.empty() ? 0 : sum / double(values.size());
+}
+
+/// A physical point of an image's own frame -> its continuous index.
+PreopToIntraopIndex physicalToIndexOf(const ImageGeometry& grid)
+{
+  Eigen::Matrix3d D, S = Eigen::Matrix3d::Zero();
+  Vec o;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) D(i, j) = grid.direction[unsigned(i)][unsigned(j)];
+    S(i, i) = grid.spacing[unsigned(i)];
+    o[i] = grid.origin[unsigned(i)];
+  }
+  PreopToIntraopIndex map;
+  map.matrix = (D * S).inverse();
+  map.offset = -map.matrix * o;
+  return map;
+}
+
+
+/// The implicit elastic step: solves (I + tau (alpha K + beta K^2)) v = b. When the polynomial has
+/// real roots it is factorised as (I + a K)(I + c K), two sparse systems with the Laplacian's own
+/// sparsity (K^2 alone fills in several times more, and the solve is the stage's inner loop).
+class MembraneStep {
+public:
+  MembraneStep(const Eigen::SparseMatrix<double>& laplacian, const ActiveSurfaceParameters& p)
+  {
+    using SparseMatrix = Eigen::SparseMatrix<double>;
+    SparseMatrix identity(laplacian.rows(), laplacian.cols());
+    identity.setIdentity();
+    const double sum = p.timeStep * p.membraneWeight, product = p.timeStep * p.bendingWeight;
+    const double discriminant = sum * sum - 4 * product;
+    if (discriminant >= 0) {
+      const double a = 0.5 * (sum + std::sqrt(discriminant)), c = 0.5 * (sum - std::sqrt(discriminant));
+      first_.compute(identity + a * laplacian);
+      second_.compute(identity + c * laplacian);
+      factored_ = true;
+      ok_ = first_.info() == Eigen::Success && second_.info() == Eigen::Success;
+    } else {
+      first_.compute(identity + sum * laplacian + product * SparseMatrix(laplacian * laplacian));
+      ok_ = first_.info() == Eigen::Success;
+    }
+  }
+  bool ok() const { return ok_; }
+  Eigen::MatrixXd solve(const Eigen::MatrixXd& b) const
+  {
+    Eigen::MatrixXd x = first_.solve(b);
+    return factored_ ? Eigen::MatrixXd(second_.solve(x)) : x;
+  }
+
+private:
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> first_, second_;
+  bool factored_ = false, ok_ = false;
+};
+
+/// The image term: where, along a line, the intensity passes from the expected inside grey level
+/// to the expected outside one.
+struct ImageEdgeTerm {
+  ScalarImage::Pointer keepAlive;
+  std::unique_ptr<TrilinearVolume> intensity;
+  double threshold = 0, insideSign = 1;
+  double contrast = 0; ///< |expected inside - expected outside|
+};
+
+struct FitOutcome {
+  Eigen::MatrixXd positions;
+  std::vector<double> residuals; ///< |distance to the target boundary| at the end
+  std::vector<bool> imageUsed;
+  unsigned iterations = 0;
+  bool converged = false;
+};
+
+std::vector<double> residualsAt(const Eigen::MatrixXd& positions, const TrilinearVolume& field, const PreopToIntraopIndex& toIndex)
+{
+  std::vector<double> r(std::size_t(positions.rows()));
+  for (Eigen::Index i = 0; i < positions.rows(); ++i) r[std::size_t(i)] = std::abs(field.value(toIndex(positions.row(i).transpose())));
+  return r;
+}
+
+/// Moves `rest` onto the zero level of `field` (reached through `toIndex`): semi-implicit steps of
+/// the membrane on v = x - rest. Nodes with a non-zero `freeReason` feel no external force.
+FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
+                      const TrilinearVolume& field, const PreopToIntraopIndex& toIndex, const ImageEdgeTerm* edges,
+                      const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p)
+{
+  const Eigen::Index n = rest.rows();
+  FitOutcome out;
+  out.residuals.assign(std::size_t(n), 0.0);
+  out.imageUsed.assign(std::size_t(n), false);
+  Eigen::MatrixXd v = Eigen::MatrixXd::Zero(n, 3), force(n, 3);
+  // Whether the segmentation looks right at a node is decided every few iterations, not at every
+  // step: a node on the fence between the two would otherwise dither and never settle.
+  std::vector<signed char> plausible(std::size_t(n), -1);
+  bool refreshPlausibility = true;
+  auto pull = [&](Eigen::Index node, const Vec& x, double& residual, bool& imageUsed) -> Vec {
+    imageUsed = false;
+    const Vec index = toIndex(x);
+    Vec gradient;
+    const double d = field.value(index, &gradient);
+    residual = std::abs(d);
+    Vec direction = toIndex.gradientToPreop(gradient);
+    const double length = direction.norm();
+    if (!(length > 1e-6)) return Vec::Zero();
+    direction /= length;
+    double target = -d; // along `direction` (outward): the segmentation's boundary
+    if (edges) {
+      const double step = 0.5; // the crossing is interpolated within a step
+      const Vec indexStep = toIndex.matrix * direction * step;
+      // The image's edge nearest to the node: inside-like to outside-like along the normal.
+      const int samples = int(std::lround(p.imageSearchMm / step));
+      double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
+      double previous = edges->insideSign * (edges->intensity->value(index - double(samples) * indexStep) - edges->threshold);
+      for (int k = -samples + 1; k <= samples; ++k) {
+        const double g = edges->insideSign * (edges->intensity->value(index + double(k) * indexStep) - edges->threshold);
+        if (previous > 0 && g <= 0) {
+          const double at = step * (double(k - 1) + previous / (previous - g));
+          if (std::abs(at) < edgeDistance) {
+            edgeDistance = std::abs(at);
+            edgeAt = at;
+          }
+        }
+        previous = g;
+      }
+      const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
+      // The expected contrast checks the segmentation: across its boundary the mean intensity of a
+      // few mm inside and of a few mm outside must differ as brain and its surroundings do (a
+      // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
+      // here (grown into fluid, or eroded into brain) and the image alone decides.
+      signed char& known = plausible[std::size_t(node)];
+      if (refreshPlausibility || known < 0) {
+        double inside = 0, outside = 0;
+        int count = 0;
+        for (double at = 1.0; at <= 4.0; at += step, ++count) {
+          inside += edges->intensity->value(index + ((target - at) / step) * indexStep);
+          outside += edges->intensity->value(index + ((target + at) / step) * indexStep);
+        }
+        known = edges->insideSign * (inside - outside) / double(count) > p.minimumContrastFraction * edges->contrast;
+      }
+      const bool segmentationPlausible = known == 1;
+      if (segmentationPlausible) {
+        if (p.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p.imageTrustMm) {
+          target = (1 - p.imageWeight) * target + p.imageWeight * edgeAt;
+          imageUsed = true;
+        }
+      } else if (!p.imageRescue) {
+        // the segmentation is followed anyway
+      } else if (edgeFound) {
+        target = edgeAt;
+        residual = std::abs(edgeAt); // the node is matched to the image's edge
+        imageUsed = true;
+      } else {
+        target = 0; // neither is to be trusted: the membrane carries the node
+      }
+    }
+    return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction;
+  };
+  auto computeForces = [&]() {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      if (freeReason[std::size_t(i)] == 1 || freeReason[std::size_t(i)] == 2) {
+        force.row(i).setZero();
+        continue;
+      }
+      bool image = false;
+      const Vec f = pull(i, rest.row(i).transpose() + v.row(i).transpose(), out.residuals[std::size_t(i)], image);
+      out.imageUsed[std::size_t(i)] = image;
+      force.row(i) = f.transpose();
+    }
+  };
+  computeForces();
+  std::vector<double> recentMean;
+  for (out.iterations = 1; out.iterations <= p.maximumIterations; ++out.iterations) {
+    const Eigen::MatrixXd next = membrane.solve(v + p.timeStep * force);
+    const Eigen::VectorXd moves = (next - v).rowwise().norm();
+    v = next;
+    refreshPlausibility = out.iterations % 10 == 0;
+    computeForces();
+    refreshPlausibility = false;
+    // Converged when nearly every node has stopped (a few may dither on a voxel's edge).
+    std::vector<double> sortedMoves(moves.data(), moves.data() + moves.size());
+    auto at95 = sortedMoves.begin() + std::ptrdiff_t(0.95 * double(sortedMoves.size() - 1));
+    std::nth_element(sortedMoves.begin(), at95, sortedMoves.end());
+    const double movement = *at95;
+    recentMean.push_back(moves.mean());
+    // Or when the surface as a whole has stopped and only a few nodes dither between an edge and
+    // the segmentation: the mean movement over the last five steps is below half the threshold.
+    bool settled = false;
+    if (recentMean.size() >= 5 && out.iterations >= 30) {
+      double sum = 0;
+      for (std::size_t k = recentMean.size() - 5; k < recentMean.size(); ++k) sum += recentMean[k];
+      settled = sum / 5.0 < 0.5 * p.convergenceMm;
+    }
+    if (movement < p.convergenceMm || settled) {
+      out.converged = true;
+      break;
+    }
+  }
+  out.iterations = std::min(out.iterations, p.maximumIterations);
+  out.positions = rest + v;
+  return out;
+}
+} // namespace
+
+void ActiveSurfaceParameters::validate() const
+{
+  auto require = [](bool ok, const std::string& what) {
+    if (!ok) throw InputError("surface: " + what);
+  };
+  require(std::isfinite(membraneWeight) && membraneWeight >= 0, "the membrane weight must be finite and >= 0");
+  require(std::isfinite(bendingWeight) && bendingWeight >= 0, "the bending weight must be finite and >= 0");
+  require(std::isfinite(timeStep) && timeStep > 0 && timeStep <= 10, "the time step must be in (0, 10]");
+  require(std::isfinite(maximumStepMm) && maximumStepMm > 0 && maximumStepMm <= 20, "the largest step must be in (0, 20] mm");
+  require(maximumIterations >= 1 && maximumIterations <= 100000, "the iteration limit must be in [1, 100000]");
+  require(std::isfinite(convergenceMm) && convergenceMm > 0, "the convergence threshold must be > 0 mm");
+  require(std::isfinite(distanceSmoothingMm) && distanceSmoothingMm >= 0 && distanceSmoothingMm <= 10,
+          "the distance smoothing must be in [0, 10] mm");
+  require(std::isfinite(imageWeight) && imageWeight >= 0 && imageWeight <= 1, "the image weight must be in [0, 1]");
+  require(std::isfinite(imageSearchMm) && imageSearchMm > 0 && imageSearchMm <= 20, "the image search range must be in (0, 20] mm");
+  require(std::isfinite(imageTrustMm) && imageTrustMm > 0, "the image trust range must be > 0 mm");
+  require(std::isfinite(unmatchedResidualMm) && unmatchedResidualMm > 0, "the unmatched residual must be > 0 mm");
+  require(std::isfinite(resectedFraction) && resectedFraction >= 0 && resectedFraction <= 1, "the resected fraction must be in [0, 1]");
+  require(!brainLabels.empty(), "no brain labels");
+}
+
+ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
+                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
+                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names)
+{
+  p.validate();
+  ActiveSurfaceResult result;
+  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError(names.rigid + ": the rigid transform is not linear");
+  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
+  if (intraopImage && !grid.sameGridAs(ImageGeometry::of(intraopImage))) {
+    throw InputError(names.labels + ": not on the intraoperative image's grid (" + grid.describe() + " against " +
+                     ImageGeometry::of(intraopImage).describe() + ")");
+  }
+  vtkDataArray* cellLabels = mesh->GetCellData()->GetArray("Label");
+  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+
+  // -- The preoperative brain surface, and what is known of its nodes.
+  std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
+  std::map<int, double> meshVolumeMl;
+  std::set<vtkIdType> tumourNodes;
+  {
+    vtkNew<vtkIdList> ids;
+    for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+      const int label = int(std::lround(cellLabels->GetComponent(c, 0)));
+      mesh->GetCellPoints(c, ids);
+      if (ids->GetNumberOfIds() != 4) throw InputError(names.mesh + ": cell " + std::to_string(c) + " is not a tetrahedron");
+      double q[4][3];
+      for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v]);
+      Vec a(q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]), b(q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]),
+        e(q[3][0] - q[0][0], q[3][1] - q[0][1], q[3][2] - q[0][2]);
+      meshVolumeMl[label] += std::abs(a.dot(b.cross(e))) / 6000.0;
+      if (label == p.tumourLabel) {
+        for (vtkIdType v = 0; v < 4; ++v) tumourNodes.insert(ids->GetId(v));
+      }
+    }
+  }
+  std::set<int> meshedBrain;
+  for (int l : brain) {
+    if (meshVolumeMl.count(l)) meshedBrain.insert(l);
+  }
+  if (meshedBrain.empty()) throw InputError(names.mesh + ": the mesh holds none of the brain labels (2, 3, 4)");
+  vtkSmartPointer<vtkPolyData> initial = boundarySurface(mesh, meshedBrain);
+  const SurfaceTopology topology = topologyOf(initial, names.mesh);
+  const std::size_t n = std::size_t(initial->GetNumberOfPoints());
+  if (n < 4) throw InputError(names.mesh + ": the brain surface of the mesh is empty");
+  vtkDataArray* meshNodeIds = initial->GetPointData()->GetArray("MeshNodeId");
+  std::vector<Vec> x0(n);
+  for (std::size_t i = 0; i < n; ++i) initial->GetPoint(vtkIdType(i), x0[i].data());
+
+  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
+  using SparseMatrix = Eigen::SparseMatrix<double>;
+  const Eigen::Index size = Eigen::Index(n);
+  SparseMatrix laplacian(size, size);
+  {
+    std::vector<Eigen::Triplet<double>> entries;
+    std::vector<double> degree(n, 0);
+    for (const auto& [a, b] : topology.edges) {
+      entries.emplace_back(a, b, -1.0);
+      entries.emplace_back(b, a, -1.0);
+      degree[std::size_t(a)] += 1;
+      degree[std::size_t(b)] += 1;
+    }
+    for (std::size_t i = 0; i < n; ++i) entries.emplace_back(Eigen::Index(i), Eigen::Index(i), degree[i]);
+    laplacian.setFromTriplets(entries.begin(), entries.end());
+  }
+  const MembraneStep membrane(laplacian, p);
+  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+
+  Eigen::MatrixXd initialPositions(size, 3);
+  for (std::size_t i = 0; i < n; ++i) initialPositions.row(Eigen::Index(i)) = x0[i].transpose();
+
+  // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near
+  //    it (within a step); the same active surface, run on the preoperative labels, finds it. The
+  //    displacement imposed is then intraoperative boundary minus preoperative boundary, so what the
+  //    mesh approximates and what the method smooths cancels out, and no shift means no motion.
+  const auto targetStart = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd smoothedStart = taubinSmoothed(initialPositions, laplacian, p.restSmoothingIterations);
+  Eigen::MatrixXd preopBoundary = smoothedStart;
+  std::vector<unsigned char> freeReason(n, 0); // 0 imposed, 1 resected tumour, 2 outside the image, 3 unmatched
+  FitOutcome preopFit;
+  if (preopLabels) {
+    Warnings ignored;
+    // Only the part around the surface is needed: distance maps are the stage's main cost.
+    std::vector<Vec> indices(n);
+    const PreopToIntraopIndex toFullIndex = physicalToIndexOf(ImageGeometry::of(preopLabels));
+    for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
+    const LabelImage::Pointer around = cropped(*preopLabels, regionAround(ImageGeometry::of(preopLabels), indices, PreopCropMarginMm));
+    const MaskImage::Pointer preopMask = targetBrainMask(*around, brain, names.preopLabels, ignored);
+    const ScalarImage::Pointer preopDistance = smoothed(boundaryDistanceMm(preopMask), p.distanceSmoothingMm);
+    const TrilinearVolume preopField(*preopDistance);
+    const PreopToIntraopIndex toPreopIndex = physicalToIndexOf(ImageGeometry::of(around.GetPointer()));
+    std::vector<unsigned char> none(n, 0);
+    preopFit = fitSurface(membrane, smoothedStart, preopField, toPreopIndex, nullptr, none, p);
+    preopBoundary = preopFit.positions;
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  }
+
+  // -- The intraoperative target.
+  const auto intraopStart = std::chrono::steady_clock::now();
+  // Is the tumour resected? Its volume in the intraoperative labels against the mesh's.
+  if (meshVolumeMl.count(p.tumourLabel)) {
+    std::size_t tumourVoxels = 0;
+    const LabelPixel* l = intraopLabels.GetBufferPointer();
+    for (std::size_t i = 0, count = grid.numberOfVoxels(); i < count; ++i) tumourVoxels += l[i] == p.tumourLabel;
+    const double voxelMl = grid.spacing[0] * grid.spacing[1] * grid.spacing[2] / 1000.0;
+    result.tumourResected = double(tumourVoxels) * voxelMl < p.resectedFraction * meshVolumeMl[p.tumourLabel];
+  }
+  const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
+  std::vector<Vec> indices(n);
+  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
+  std::size_t outside = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const vtkIdType node = vtkIdType(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)));
+    if (result.tumourResected && tumourNodes.count(node)) freeReason[i] = 1;
+    if (!TrilinearVolume::insideGrid(toFullIndex(x0[i]), grid)) {
+      freeReason[i] = 2;
+      ++outside;
+    }
+  }
+  if (outside > n / 2) {
+    std::ostringstream m;
+    m << names.labels << ": the brain surface does not overlap the intraoperative image (" << outside << " of " << n
+      << " surface nodes fall outside it after the rigid transform)";
+    throw InputError(m.str());
+  }
+  const itk::ImageRegion<3> region = regionAround(grid, indices, CropMarginMm);
+  const LabelImage::Pointer labelsAround = cropped(intraopLabels, region);
+  const MaskImage::Pointer mask = targetBrainMask(*labelsAround, brain, names.labels, result.warnings);
+  const ScalarImage::Pointer distance = smoothed(boundaryDistanceMm(mask), p.distanceSmoothingMm);
+  const TrilinearVolume distanceField(*distance);
+  const ImageGeometry cropGrid = ImageGeometry::of(labelsAround.GetPointer());
+  const PreopToIntraopIndex toIndex = preopToIntraopIndex(rigidIntraopToPreop, cropGrid);
+
+
+  // Expected grey levels just inside and just outside the brain, from the segmentation's boundary band.
+  std::unique_ptr<ImageEdgeTerm> edges;
+  if (intraopImage && (p.imageWeight > 0 || p.imageRescue)) {
+    edges = std::make_unique<ImageEdgeTerm>();
+    const ScalarImage::Pointer imageAround = cropped(*intraopImage, region);
+    const float* d = distance->GetBufferPointer();
+    const float* v = imageAround->GetBufferPointer();
+    std::vector<double> inside, outsideBand;
+    for (std::size_t i = 0, count = cropGrid.numberOfVoxels(); i < count; ++i) {
+      if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
+      else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
+    }
+    result.expectedInsideIntensity = median(inside);
+    result.expectedOutsideIntensity = median(outsideBand);
+    edges->threshold = 0.5 * (result.expectedInsideIntensity + result.expectedOutsideIntensity);
+    edges->insideSign = result.expectedInsideIntensity >= result.expectedOutsideIntensity ? 1.0 : -1.0;
+    edges->contrast = std::abs(result.expectedInsideIntensity - result.expectedOutsideIntensity);
+    edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
+    edges->keepAlive = imageAround;
+  }
+  result.targetSeconds = secondsSince(intraopStart);
+
+  // -- The active surface, from the preoperative boundary onto the intraoperative one.
+  const auto iterationStart = std::chrono::steady_clock::now();
+  const std::vector<double> initialResiduals = residualsAt(initialPositions, distanceField, toIndex);
+  const FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
+  result.iterations = fit.iterations;
+  result.converged = fit.converged;
+  if (!result.converged) {
+    result.warnings.push_back("surface: the active surface did not converge in " + std::to_string(p.maximumIterations) +
+                              " iterations");
+  }
+  if (preopLabels && !preopFit.converged) {
+    result.warnings.push_back("surface: the fit to the preoperative boundary did not converge in " +
+                              std::to_string(p.maximumIterations) + " iterations");
+  }
+  result.iterationSeconds = secondsSince(iterationStart);
+
+  // -- Nodes left free, and the figures.
+  std::vector<double> residuals, before;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (freeReason[i] == 0 && fit.residuals[i] > p.unmatchedResidualMm) freeReason[i] = 3;
+    switch (freeReason[i]) {
+    case 0:
+      residuals.push_back(fit.residuals[i]);
+      before.push_back(initialResiduals[i]);
+      result.imageTermNodes += fit.imageUsed[i];
+      break;
+    case 1: ++result.freeResected; break;
+    case 2: ++result.freeOutsideImage; break;
+    default: ++result.freeUnmatched; break;
+    }
+  }
+  result.surfaceNodes = n;
+  result.imposedNodes = residuals.size();
+  if (result.imposedNodes < n / 2) {
+    std::ostringstream m;
+    m << "surface: only " << result.imposedNodes << " of " << n
+      << " brain surface nodes found the intraoperative brain boundary; the segmentation does not match the preoperative brain";
+    throw MethodError(m.str());
+  }
+  if (result.freeUnmatched > 0) {
+    std::ostringstream w;
+    w << "surface: " << result.freeUnmatched << " surface nodes stayed farther than " << p.unmatchedResidualMm
+      << " mm from the intraoperative brain and are left free";
+    result.warnings.push_back(w.str());
+  }
+  result.meanResidualMm = mean(residuals);
+  result.initialMeanResidualMm = mean(before);
+  result.p95ResidualMm = percentile(residuals, 0.95);
+  result.maxResidualMm = *std::max_element(residuals.begin(), residuals.end());
+
+  const Eigen::MatrixXd u = fit.positions - preopBoundary;
+  std::vector<Vec> from(n), to(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
+    to[i] = fit.positions.row(Eigen::Index(i)).transpose();
+  }
+  for (const auto& t : topology.triangles) result.flippedTriangles += triangleNormal(from, t).dot(triangleNormal(to, t)) <= 0;
+  if (result.flippedTriangles > topology.triangles.size() / 100) {
+    throw MethodError("surface: the active surface folded (" + std::to_string(result.flippedTriangles) +
+                      " triangles reversed); raise the membrane or bending weight");
+  }
+  if (result.flippedTriangles > 0) {
+    result.warnings.push_back("surface: " + std::to_string(result.flippedTriangles) + " surface triangles reversed their orientation");
+  }
+
+  // -- The deformed surface: each mesh node moved by its displacement, with the arrays.
+  auto surface = vtkSmartPointer<vtkPolyData>::New();
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  vtkNew<vtkDoubleArray> displacement, magnitude;
+  displacement->SetName("Displacement");
+  displacement->SetNumberOfComponents(3);
+  magnitude->SetName("DisplacementMagnitude");
+  vtkNew<vtkIntArray> nodeIds, imposed;
+  nodeIds->SetName("MeshNodeId");
+  imposed->SetName("Imposed");
+  std::vector<double> magnitudes;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec d = u.row(Eigen::Index(i)).transpose();
+    const Vec moved = x0[i] + d;
+    points->InsertNextPoint(moved.data());
+    displacement->InsertNextTuple(d.data());
+    magnitude->InsertNextValue(d.norm());
+    magnitudes.push_back(d.norm());
+    nodeIds->InsertNextValue(int(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))));
+    imposed->InsertNextValue(freeReason[i] == 0 ? 1 : 0);
+  }
+  result.meanDisplacementMm = mean(magnitudes);
+  result.maxDisplacementMm = *std::max_element(magnitudes.begin(), magnitudes.end());
+  surface->SetPoints(points);
+  surface->SetPolys(initial->GetPolys());
+  surface->GetPointData()->AddArray(displacement);
+  surface->GetPointData()->AddArray(magnitude);
+  surface->GetPointData()->AddArray(nodeIds);
+  surface->GetPointData()->AddArray(imposed);
+  surface->GetPointData()->SetActiveScalars("DisplacementMagnitude");
+  result.surface = surface;
+  return result;
+}
+
+} // namespace brainshift

@@ -1,0 +1,116 @@
+#pragma once
+// Surface correspondence (Warfield et al. 2000, after Ferrant et al.): an active surface carries
+// the preoperative brain surface onto the intraoperative brain boundary, and its displacements
+// become the boundary conditions of the volumetric solve.
+//
+// The surface is the brain boundary of the tetrahedral mesh (its nodes keep their mesh node ids).
+// It lives in the model frame (the preoperative frame); the intraoperative data are reached
+// through the rigid transform. What moves it:
+// - the external force pulls each node along the gradient of a smoothed signed distance map of the
+//   intraoperative brain (cavity and holes filled, the largest component kept) towards its zero
+//   level, capped per iteration;
+// - an image term guards that target with the intraoperative intensity: the expected grey levels
+//   just inside and just outside the brain are learned from the segmentation's own boundary band;
+//   where the segmentation's boundary does not show their contrast locally (a few mm inside against
+//   a few mm outside), the segmentation is wrong there and the node follows the image's edge
+//   instead (the crossing between the two grey levels along its normal), so a classification error does not
+//   drag the surface. Where the segmentation looks right, the edge may also refine it
+//   (`imageWeight`; off by default, as measured);
+// - internal elastic forces act on the displacement from a rest shape (not on the positions, so the
+//   surface does not shrink): a membrane (graph Laplacian K) and a bending term (K^2), stepped
+//   semi-implicitly, v <- (I + tau (alpha K + beta K^2))^-1 (v + tau f(rest + v)), the matrix
+//   factorised once (as (I + a K)(I + c K) when it can be). The rest shape is the preoperative
+//   boundary itself: the same active surface first carries the mesh's surface (Taubin-smoothed)
+//   onto the preoperative labels' boundary, and the displacement imposed on each node is the move
+//   from there to the intraoperative boundary; so the lattice's staircase and the method's own
+//   smoothing cancel out, and no shift means no motion.
+// Iteration stops when 95 % of the nodes move less than `convergenceMm` in a step (or, after 30
+// steps, when the mean movement has stayed below half of it for five).
+//
+// Nodes without a counterpart are left free (Imposed 0) for the solve rather than imposed wrongly:
+// nodes of a tumour that has been resected (its surface has become a cavity's wall), nodes whose
+// intraoperative position falls outside the intraoperative image, and nodes that end farther than
+// `unmatchedResidualMm` from the target boundary.
+#include "BrainShiftErrors.h"
+#include "ImageTypes.h"
+#include "TransformIO.h"
+
+#include <vtkPolyData.h>
+#include <vtkSmartPointer.h>
+#include <vtkUnstructuredGrid.h>
+
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+struct ActiveSurfaceParameters {
+  double membraneWeight = 1.0;       ///< alpha: resistance to stretching of the displacement
+  double bendingWeight = 0.2;        ///< beta: resistance to bending (alpha^2 >= 4 beta / tau: fast path)
+  double timeStep = 1.0;             ///< tau of the semi-implicit step
+  double maximumStepMm = 2.0;        ///< the external force's pull per iteration is capped here
+  unsigned maximumIterations = 200;
+  unsigned restSmoothingIterations = 10; ///< Taubin passes that take the staircase off the rest shape
+  double convergenceMm = 0.01;       ///< 95th percentile of the node movements in a step: converged
+  double distanceSmoothingMm = 1.0;  ///< Gaussian sigma on the distance map (removes staircasing)
+  /// Share of the image's edge in the target where the segmentation looks right (0: the
+  /// segmentation alone there; measured best on the built-in case, Testing/Benchmarks/surface).
+  double imageWeight = 0.0;
+  /// Where the expected grey levels say the segmentation is wrong, the image's edge alone moves the node.
+  bool imageRescue = true;
+  /// The segmentation looks right at a node when the intensity 1-4 mm inside and 1-4 mm outside
+  /// its boundary differ by at least this share of the expected contrast.
+  double minimumContrastFraction = 0.35;
+  double imageSearchMm = 3.0;        ///< the image term looks this far along the normal, both ways
+  double imageTrustMm = 1.5;         ///< and is used only where it agrees with the segmentation this well
+  double unmatchedResidualMm = 2.0;  ///< a node ending farther than this from the target is left free
+  double resectedFraction = 0.25;    ///< tumour volume left in the intraop labels below this: resected
+  std::vector<int> brainLabels{2, 3, 4}; ///< the mesh tissues whose union is the brain
+  int tumourLabel = 4;
+  void validate() const;
+};
+
+struct ActiveSurfaceResult {
+  /// The deformed brain surface (model frame, LPS mm): point arrays "Displacement",
+  /// "DisplacementMagnitude", "MeshNodeId", "Imposed" (as ../shared/CONTRACT.md says).
+  vtkSmartPointer<vtkPolyData> surface;
+  unsigned iterations = 0;
+  bool converged = false;
+  std::size_t surfaceNodes = 0, imposedNodes = 0;
+  std::size_t freeResected = 0, freeOutsideImage = 0, freeUnmatched = 0;
+  bool tumourResected = false;
+  /// Distance of the imposed nodes to the target boundary at the end (mm).
+  double meanResidualMm = 0, p95ResidualMm = 0, maxResidualMm = 0;
+  double initialMeanResidualMm = 0;  ///< the same before deforming
+  double meanDisplacementMm = 0, maxDisplacementMm = 0;
+  double expectedInsideIntensity = 0, expectedOutsideIntensity = 0;
+  std::size_t imageTermNodes = 0;    ///< nodes where the image term found an edge at the end
+  std::size_t flippedTriangles = 0;  ///< triangles whose orientation reversed (should be none)
+  /// The fit to the preoperative boundary (mesh and preoperative labels only: could be prepared
+  /// before surgery), the intraoperative target's distance map, the intraoperative iterations.
+  double preopBoundarySeconds = 0, targetSeconds = 0, iterationSeconds = 0;
+  Warnings warnings;
+};
+
+/// The names the errors use for the inputs (their files, where they came from files).
+struct ActiveSurfaceInputNames {
+  std::string mesh = "the mesh";
+  std::string preopLabels = "the preoperative labels";
+  std::string labels = "the intraoperative segmentation";
+  std::string rigid = "the rigid transform";
+};
+
+/// Deforms the brain boundary of `mesh` (cell array "Label") onto the brain of `intraopLabels`.
+/// `preopLabels` (the label map the mesh was made from) tells where the preoperative boundary is
+/// at each node: the displacement is the move from there to the intraoperative boundary. Without
+/// it the mesh's own (smoothed) surface stands for the preoperative boundary.
+/// `intraopImage` (same grid as the labels) feeds the image term; null turns it off.
+/// InputError for a mesh without the brain labels or with a non-manifold brain surface, an empty
+/// target segmentation, a surface that does not overlap the intraoperative image, mismatched grids.
+/// MethodError if the surface folds (triangles reversed) or most nodes find no counterpart.
+ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
+                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
+                                       const ActiveSurfaceParameters& parameters,
+                                       const ActiveSurfaceInputNames& names = {});
+
+} // namespace brainshift

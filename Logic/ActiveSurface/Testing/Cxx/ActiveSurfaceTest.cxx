@@ -1,0 +1,329 @@
+// The active surface: a sphere that shrinks under a rigid motion (the surface lands on the target
+// sphere, moves radially, honours the rigid transform), the small built-in case against its truth,
+// a resected tumour left free, determinism, and bad input named.
+#include "ActiveSurfaceLogic.h"
+#include "BrainShiftCaseSimulator.h"
+#include "BrainShiftErrors.h"
+#include "BrainShiftTestingSupport.h"
+#include "LabelMapMesher.h"
+#include "SurfaceDisplacementEvaluation.h"
+#include "SyntheticData.h"
+
+#include <itkImageRegionIteratorWithIndex.h>
+#include <vtkCellData.h>
+#include <vtkDataArray.h>
+#include <vtkIntArray.h>
+#include <vtkPoints.h>
+#include <vtkPointData.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+
+namespace {
+using namespace brainshift;
+using brainshift::testing::point;
+
+const PhysicalPoint sphereCentre = point(2.0, -4.0, 6.0);
+
+/// Labels on `geometry`: parenchyma (2) within `radius` mm of the centre (seen through
+/// `intraopToPreop`, so the content is where that transform says), and a tumour (4) of 9 mm at the
+/// top touching the surface unless `resected`.
+LabelImage::Pointer sphereLabels(const ImageGeometry& geometry, double radius, const SpatialTransform* intraopToPreop,
+                                 bool tumour, bool resected)
+{
+  auto image = brainshift::testing::makeImage<LabelImage>(geometry);
+  itk::ImageRegionIteratorWithIndex<LabelImage> it(image, image->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint y;
+    image->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+    const PhysicalPoint x = intraopToPreop ? intraopToPreop->TransformPoint(y) : y;
+    const double r = x.EuclideanDistanceTo(sphereCentre);
+    LabelPixel label = r <= radius ? 2 : 0;
+    PhysicalPoint top = sphereCentre;
+    top[2] += radius - 4.0;
+    if (tumour && x.EuclideanDistanceTo(top) <= 9.0) label = resected ? 0 : 4;
+    it.Set(label);
+  }
+  return image;
+}
+
+ScalarImage::Pointer intensityOf(const LabelImage& labels)
+{
+  auto image = brainshift::testing::makeImage<ScalarImage>(ImageGeometry::of(&labels));
+  const LabelPixel* l = labels.GetBufferPointer();
+  float* v = image->GetBufferPointer();
+  for (std::size_t i = 0, n = labels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) v[i] = l[i] ? 100.0f : 30.0f;
+  return image;
+}
+
+ImageGeometry preopGrid()
+{
+  return brainshift::testing::grid({{64, 64, 64}}, {1.5, 1.5, 1.5}, point(2.0 - 47.25, -4.0 - 47.25, 6.0 - 47.25));
+}
+
+ImageGeometry intraopGrid()
+{
+  // Thick slices, another orientation: the target is reached through the rigid transform only.
+  return brainshift::testing::grid({{96, 96, 44}}, {1.25, 1.25, 2.5}, point(-55, -62, -50),
+                                   brainshift::testing::rotationAbout(0.2, 1.0, 0.3, 12.0));
+}
+
+void sphereShrinks()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 3.0;
+  meshing.labels = {2};
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  const auto rigid = brainshift::testing::makeRigidTransform(); // intraop -> preop
+  const auto intraop = sphereLabels(intraopGrid(), 32.0, rigid.GetPointer(), false, false);
+  const auto image = intensityOf(*intraop);
+  ActiveSurfaceParameters parameters;
+  const ActiveSurfaceResult result = deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, image.GetPointer(), *rigid, parameters);
+  std::cout << "sphere: " << result.surfaceNodes << " nodes, " << result.iterations << " iterations, residual "
+            << result.initialMeanResidualMm << " -> " << result.meanResidualMm << " mm, image term at " << result.imageTermNodes
+            << " nodes, expected grey levels " << result.expectedInsideIntensity << " / " << result.expectedOutsideIntensity << "\n";
+  {
+    ActiveSurfaceParameters segmentationOnly;
+    segmentationOnly.imageWeight = 0;
+    const ActiveSurfaceResult plain = deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, nullptr, *rigid, segmentationOnly);
+    std::cout << "  segmentation only: " << plain.iterations << " iterations, residual " << plain.meanResidualMm << " mm\n";
+  }
+  BS_CHECK(result.converged);
+  BS_CHECK(result.imposedNodes == result.surfaceNodes);
+  BS_CHECK(result.flippedTriangles == 0);
+  BS_CHECK(result.initialMeanResidualMm > 2.0);
+  BS_CHECK_MSG(result.meanResidualMm < 0.3, result.meanResidualMm);
+  BS_CHECK(result.imageTermNodes == 0); // the segmentation shows the expected contrast everywhere
+  BS_CHECK_NEAR(result.expectedInsideIntensity, 100.0, 1.0);
+  BS_CHECK_NEAR(result.expectedOutsideIntensity, 30.0, 1.0);
+  // Each node moves 3 mm towards the centre (the mesh's nodes are only near the preoperative
+  // boundary; they move as the boundary does, wherever they sit on the staircase).
+  vtkPolyData* s = result.surface;
+  vtkDataArray* displacement = s->GetPointData()->GetArray("Displacement");
+  BS_CHECK(s->GetPointData()->GetArray("DisplacementMagnitude") && s->GetPointData()->GetArray("MeshNodeId") &&
+           s->GetPointData()->GetArray("Imposed"));
+  double radiusError = 0, tangential = 0, radial = 0;
+  (void)sphereCentre;
+  for (vtkIdType i = 0; i < s->GetNumberOfPoints(); ++i) {
+    double x[3], u[3];
+    s->GetPoint(i, x);
+    displacement->GetTuple(i, u);
+    double n[3], r = 0, along = 0;
+    for (int k = 0; k < 3; ++k) {
+      n[k] = x[k] - u[k] - sphereCentre[unsigned(k)];
+      r += n[k] * n[k];
+    }
+    r = std::sqrt(r);
+    for (int k = 0; k < 3; ++k) {
+      n[k] /= r;
+      along += u[k] * n[k];
+    }
+    radiusError += std::abs(along + 3.0); // each node moves as the boundary near it: 3 mm in
+    radial += along;
+    double t2 = 0;
+    for (int k = 0; k < 3; ++k) t2 += (u[k] - along * n[k]) * (u[k] - along * n[k]);
+    tangential += std::sqrt(t2);
+  }
+  const double count = double(s->GetNumberOfPoints());
+  std::cout << "  |radial move + 3| " << radiusError / count << " mm, radial move " << radial / count << " mm, tangential "
+            << tangential / count << " mm\n";
+  BS_CHECK_MSG(radiusError / count < 0.3, radiusError / count);
+  BS_CHECK_NEAR(radial / count, -3.0, 0.2);
+  BS_CHECK_MSG(tangential / count < 0.4, tangential / count);
+
+  // Deterministic.
+  const ActiveSurfaceResult again = deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, image.GetPointer(), *rigid, parameters);
+  vtkDataArray* other = again.surface->GetPointData()->GetArray("Displacement");
+  for (vtkIdType i = 0; i < s->GetNumberOfPoints(); ++i) {
+    for (int k = 0; k < 3; ++k) BS_CHECK(displacement->GetComponent(i, k) == other->GetComponent(i, k));
+  }
+
+  // Segmentation alone (no image term) also lands.
+  ActiveSurfaceParameters segmentationOnly;
+  segmentationOnly.imageWeight = 0;
+  const ActiveSurfaceResult plain = deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, nullptr, *rigid, segmentationOnly);
+  BS_CHECK(plain.imageTermNodes == 0);
+  BS_CHECK_MSG(plain.meanResidualMm < 0.3, plain.meanResidualMm);
+}
+
+void imageGuardsAgainstAWrongSegmentation()
+{
+  // The intraoperative segmentation is eroded by 4 mm over a cap of the sphere (a classification
+  // that took brain for fluid there); the image still shows the whole sphere.
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 3.0;
+  meshing.labels = {2};
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  auto identity = itk::Euler3DTransform<double>::New();
+  const auto truth = sphereLabels(intraopGrid(), 32.0, nullptr, false, false);
+  const auto image = intensityOf(*truth);
+  auto eroded = sphereLabels(intraopGrid(), 32.0, nullptr, false, false);
+  itk::ImageRegionIteratorWithIndex<LabelImage> it(eroded, eroded->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint y;
+    eroded->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+    if (y[2] - sphereCentre[2] > 20.0 && y.EuclideanDistanceTo(sphereCentre) > 28.0) it.Set(0);
+  }
+  auto capError = [&](const ActiveSurfaceResult& r) { // mean |radial move + 3| over the cap
+    vtkDataArray* u = r.surface->GetPointData()->GetArray("Displacement");
+    double sum = 0;
+    int count = 0;
+    for (vtkIdType i = 0; i < r.surface->GetNumberOfPoints(); ++i) {
+      double x[3], d[3], radial = 0, length = 0;
+      r.surface->GetPoint(i, x);
+      u->GetTuple(i, d);
+      for (int k = 0; k < 3; ++k) length += (x[k] - d[k] - sphereCentre[unsigned(k)]) * (x[k] - d[k] - sphereCentre[unsigned(k)]);
+      length = std::sqrt(length);
+      for (int k = 0; k < 3; ++k) radial += d[k] * (x[k] - d[k] - sphereCentre[unsigned(k)]) / length;
+      if (x[2] - d[2] - sphereCentre[2] < 26.0) continue;
+      sum += std::abs(radial + 3.0);
+      ++count;
+    }
+    return sum / std::max(count, 1);
+  };
+  ActiveSurfaceParameters segmentationOnly;
+  segmentationOnly.imageRescue = false;
+  const ActiveSurfaceResult followed = deformBrainSurface(mesh.mesh, preop.GetPointer(), *eroded, image.GetPointer(), *identity, segmentationOnly);
+  const ActiveSurfaceResult guarded = deformBrainSurface(mesh.mesh, preop.GetPointer(), *eroded, image.GetPointer(), *identity, ActiveSurfaceParameters{});
+  std::cout << "eroded cap: error " << capError(followed) << " mm following the segmentation, " << capError(guarded)
+            << " mm guarded by the image (" << guarded.imageTermNodes << " nodes on the image's edge)\n";
+  BS_CHECK(capError(followed) > 2.0);
+  BS_CHECK_MSG(capError(guarded) < 1.2 && capError(guarded) < 0.4 * capError(followed), capError(guarded));
+  BS_CHECK(guarded.imageTermNodes > 50);
+}
+
+void resectedTumourIsFree()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, true, false);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 3.0;
+  meshing.labels = {2, 4};
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  auto identity = itk::Euler3DTransform<double>::New();
+  const auto intraop = sphereLabels(preopGrid(), 35.0, nullptr, true, true); // the cavity opens at the top
+  const ActiveSurfaceResult result = deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, nullptr, *identity, ActiveSurfaceParameters{});
+  std::cout << "resected: " << result.freeResected << " free of " << result.surfaceNodes << ", residual " << result.meanResidualMm
+            << " mm\n";
+  BS_CHECK(result.tumourResected);
+  BS_CHECK(result.freeResected > 10);
+  BS_CHECK(result.imposedNodes + result.freeResected + result.freeUnmatched == result.surfaceNodes);
+  BS_CHECK_MSG(result.meanResidualMm < 0.5, result.meanResidualMm);
+  // The free nodes are the tumour's: high on the sphere.
+  vtkDataArray* imposed = result.surface->GetPointData()->GetArray("Imposed");
+  for (vtkIdType i = 0; i < result.surface->GetNumberOfPoints(); ++i) {
+    if (imposed->GetComponent(i, 0) > 0.5) continue;
+    double x[3];
+    result.surface->GetPoint(i, x);
+    BS_CHECK_MSG(x[2] - sphereCentre[2] > 15.0, x[2] - sphereCentre[2]);
+  }
+  // The tumour still there: nothing is free.
+  const auto kept = sphereLabels(preopGrid(), 35.0, nullptr, true, false);
+  const ActiveSurfaceResult intact = deformBrainSurface(mesh.mesh, preop.GetPointer(), *kept, nullptr, *identity, ActiveSurfaceParameters{});
+  BS_CHECK(!intact.tumourResected);
+  BS_CHECK(intact.imposedNodes == intact.surfaceNodes);
+}
+
+void smallCaseAgainstTruth()
+{
+  CaseParameters parameters;
+  parameters.size = CaseSize::Small;
+  const SimulatedCase c = simulateCase(parameters);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 4.0;
+  const LabelMapMesh mesh = meshLabelMap(*c.preopLabels, meshing);
+  const ActiveSurfaceResult result =
+    deformBrainSurface(mesh.mesh, c.preopLabels.GetPointer(), *c.intraopLabels, c.intraopImage.GetPointer(), *c.rigidIntraopToPreop, ActiveSurfaceParameters{});
+  const SurfaceDisplacementAccuracy a =
+    evaluateSurfaceDisplacement(result.surface, *c.intraopToPreop, *c.rigidIntraopToPreop, *c.preopLabels);
+  std::cout << "small case: " << result.surfaceNodes << " nodes, " << result.imposedNodes << " imposed, " << result.iterations
+            << " iterations, residual " << result.initialMeanResidualMm << " -> " << result.meanResidualMm << " mm\n"
+            << "  error mean " << a.meanErrorMm << " p95 " << a.p95ErrorMm << " max " << a.maxErrorMm << " mm (true mean "
+            << a.meanTrueDisplacementMm << ", max " << a.maxTrueDisplacementMm << "); moving " << a.movingNodes << " nodes: error "
+            << a.movingMeanErrorMm << " mm of " << a.movingMeanTrueDisplacementMm << " mm; residual to the true boundary "
+            << a.meanResidualMm << " mm\n";
+  BS_CHECK(result.converged);
+  BS_CHECK_MSG(result.flippedTriangles <= std::size_t(result.surface->GetNumberOfCells() / 1000), result.flippedTriangles);
+  BS_CHECK(a.maxTrueDisplacementMm > 7.0);
+  BS_CHECK(a.movingNodes > 20);
+  // Where the brain sank, the surface follows it: the error is a fraction of the shift.
+  BS_CHECK_MSG(a.movingMeanErrorMm < 0.3 * a.movingMeanTrueDisplacementMm, a.movingMeanErrorMm);
+  BS_CHECK_MSG(a.meanErrorMm < 1.0, a.meanErrorMm);
+  BS_CHECK_MSG(a.meanResidualMm < 1.0, a.meanResidualMm);
+}
+
+void badInput()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 4.0;
+  meshing.labels = {2};
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  auto identity = itk::Euler3DTransform<double>::New();
+  const ActiveSurfaceParameters parameters;
+  ActiveSurfaceInputNames names;
+  names.labels = "intraop_labels.nii.gz";
+  names.mesh = "mesh.vtu";
+
+  auto empty = brainshift::testing::makeImage<LabelImage>(preopGrid());
+  empty->FillBuffer(0);
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *empty, nullptr, *identity, parameters, names), InputError,
+                  "intraop_labels.nii.gz: the intraoperative segmentation holds no brain");
+
+  // Two equal brains apart.
+  auto disjoint = brainshift::testing::makeImage<LabelImage>(preopGrid());
+  itk::ImageRegionIteratorWithIndex<LabelImage> it(disjoint, disjoint->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) it.Set((it.GetIndex()[0] - 16) * (it.GetIndex()[0] - 16) + (it.GetIndex()[1] - 32) * (it.GetIndex()[1] - 32) +
+                                           (it.GetIndex()[2] - 32) * (it.GetIndex()[2] - 32) < 100 ||
+                                         (it.GetIndex()[0] - 48) * (it.GetIndex()[0] - 48) + (it.GetIndex()[1] - 32) * (it.GetIndex()[1] - 32) +
+                                           (it.GetIndex()[2] - 32) * (it.GetIndex()[2] - 32) < 100 ? 2 : 0);
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *disjoint, nullptr, *identity, parameters, names), InputError, "disjoint");
+
+  // The surface far from the intraoperative image.
+  auto far = itk::Euler3DTransform<double>::New();
+  itk::Euler3DTransform<double>::OutputVectorType translation;
+  translation.Fill(500.0);
+  far->SetTranslation(translation);
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *preop, nullptr, *far, parameters, names), InputError,
+                  "does not overlap the intraoperative image");
+
+  // Labels and image on different grids.
+  const auto otherGrid = intensityOf(*sphereLabels(intraopGrid(), 30.0, nullptr, false, false));
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *preop, otherGrid.GetPointer(), *identity, parameters, names), InputError,
+                  "not on the intraoperative image's grid");
+
+  // A mesh whose brain surface is not a manifold: two tetrahedra touching at an edge only.
+  vtkNew<vtkUnstructuredGrid> edgeOnly;
+  vtkNew<vtkPoints> points;
+  const double coordinates[6][3] = {{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 10}, {10, 10, 10}, {10, 10, -10}};
+  for (const auto& c : coordinates) points->InsertNextPoint(c);
+  edgeOnly->SetPoints(points);
+  const vtkIdType a[4] = {0, 1, 2, 3}, b[4] = {1, 2, 4, 5};
+  edgeOnly->InsertNextCell(VTK_TETRA, 4, a);
+  edgeOnly->InsertNextCell(VTK_TETRA, 4, b);
+  vtkNew<vtkIntArray> label;
+  label->SetName("Label");
+  label->InsertNextValue(2);
+  label->InsertNextValue(2);
+  edgeOnly->GetCellData()->AddArray(label);
+  BS_CHECK_THROWS(deformBrainSurface(edgeOnly, preop.GetPointer(), *preop, nullptr, *identity, parameters, names), InputError,
+                  "mesh.vtu: the brain surface of the mesh is not a closed manifold");
+
+  ActiveSurfaceParameters absurd;
+  absurd.imageWeight = 2.0;
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *preop, nullptr, *identity, absurd, names), InputError, "image weight");
+}
+} // namespace
+
+int ActiveSurfaceTest(int, char*[])
+{
+  return brainshift::testing::runTest("ActiveSurfaceTest", [] {
+    sphereShrinks();
+    imageGuardsAgainstAWrongSegmentation();
+    resectedTumourIsFree();
+    badInput();
+    smallCaseAgainstTruth();
+  });
+}
