@@ -437,6 +437,7 @@ void addBenchCommand(CLI::App& app)
   CLI::App* bench = app.add_subcommand("bench", "Speed and accuracy measurements against the built-in case's truth "
                                                 "(charts: Testing/Benchmarks/)");
   bench->require_subcommand(1);
+  addMeshBenchCommand(*bench);
 
   auto rigid = std::make_shared<RigidBenchOptions>();
   CLI::App* command = bench->add_subcommand("rigid", "Rigid registration: accuracy and speed, and the capture range");
