@@ -38,7 +38,14 @@ void runMeshBench(const MeshBenchOptions& o)
       mp.resolutionMm = h;
       mp.backend = backend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
       Stopwatch clock;
-      const LabelMapMesh mesh = meshLabelMap(*simulated.preopLabels, mp);
+      LabelMapMesh mesh;
+      try {
+        mesh = meshLabelMap(*simulated.preopLabels, mp);
+      } catch (const InputError& e) { // a tissue vanishing at a coarse resolution is a result too
+        csv << backend << ',' << h << ',' << clock.seconds() << ",,,,,,,,\n";
+        std::printf("  %s %.1f mm: %s\n", backend.c_str(), h, e.what());
+        continue;
+      }
       const double seconds = clock.seconds();
       const MeshQuality& q = mesh.quality;
       csv << backend << ',' << h << ',' << seconds << ',' << q.nodes << ',' << q.tetrahedra << ',' << q.minimumDihedralDegrees << ','
