@@ -432,13 +432,13 @@ void runSimulateBench(const SimulateBenchOptions& o)
 
 } // namespace
 
-void addSurfaceBench(CLI::App* bench); // BenchSurface.cxx
 
 void addBenchCommand(CLI::App& app)
 {
   CLI::App* bench = app.add_subcommand("bench", "Speed and accuracy measurements against the built-in case's truth "
                                                 "(charts: Testing/Benchmarks/)");
   bench->require_subcommand(1);
+  addMeshBenchCommand(*bench);
 
   auto rigid = std::make_shared<RigidBenchOptions>();
   CLI::App* command = bench->add_subcommand("rigid", "Rigid registration: accuracy and speed, and the capture range");
@@ -461,7 +461,7 @@ void addBenchCommand(CLI::App& app)
   classifyCommand->add_option("--bias", classify->bias, "bias field strengths")->delimiter(',')->capture_default_str();
   classifyCommand->add_option("--runs", classify->runs, "timed runs on the default case")->capture_default_str();
   classifyCommand->add_option("--seed", classify->seed, "seed of the cases")->capture_default_str();
-  addSurfaceBench(bench);
+  addSurfaceBenchCommand(*bench);
 
   auto simulate = std::make_shared<SimulateBenchOptions>();
   CLI::App* simulateCommand = bench->add_subcommand(

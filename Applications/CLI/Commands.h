@@ -17,6 +17,7 @@ struct RunOptions {
   std::vector<std::string> overlays;
   std::optional<int> ranks;
   std::optional<double> meshResolutionMm;
+  std::optional<std::string> meshBackend;
   std::optional<std::string> solverOptions;
   std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
 };
@@ -26,5 +27,7 @@ void addDemoCommand(CLI::App& app);
 void addRegisterCommand(CLI::App& app);
 void addStageCommands(CLI::App& app);
 void addBenchCommand(CLI::App& app);
+void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.cxx
+void addSurfaceBenchCommand(CLI::App& bench); ///< `bench surface`, SurfaceBenchCommand.cxx
 
 } // namespace brainshift::cli

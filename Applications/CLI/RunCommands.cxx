@@ -33,6 +33,8 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
   }
   if (meshFlags) {
     command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 3)");
+    command->add_option("--mesh-backend", options.meshBackend,
+                        "lattice (Kuhn lattice, boundary nodes snapped; default) or cgal (CGAL Mesh_3)");
   }
   if (solverFlags) {
     command->add_option("--ranks", options.ranks, "MPI ranks of the finite element worker (default 1)");
@@ -45,6 +47,7 @@ Configuration configurationFor(const RunOptions& options)
 {
   Configuration configuration = options.config.empty() ? Configuration{} : Configuration::load(options.config);
   if (options.meshResolutionMm) configuration.meshResolutionMm = *options.meshResolutionMm;
+  if (options.meshBackend) configuration.meshBackend = *options.meshBackend;
   if (options.solverOptions) configuration.solverOptions = *options.solverOptions;
   if (options.ranks) configuration.ranks = *options.ranks;
   configuration.validate(options.config.empty() ? "command line" : "command line and " + options.config.string());

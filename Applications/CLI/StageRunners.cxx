@@ -151,6 +151,7 @@ void runMeshStage(RunContext& context)
   MeshingParameters parameters;
   parameters.resolutionMm = configuration.meshResolutionMm;
   parameters.labels = configuration.meshLabels;
+  parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
   const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
   writeModel(result.mesh, context.output("mesh.vtu"));
   const MeshQuality& q = result.quality;
@@ -160,7 +161,7 @@ void runMeshStage(RunContext& context)
     voxels[std::to_string(label)] = q.voxelVolumeMl.at(label);
   }
   context.report().setStage("mesh", {{"wall_seconds", clock.seconds()},
-                                     {"backend", "lattice"},
+                                     {"backend", configuration.meshBackend},
                                      {"resolution_mm", parameters.resolutionMm},
                                      {"nodes", q.nodes},
                                      {"tetrahedra", q.tetrahedra},

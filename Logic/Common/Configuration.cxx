@@ -67,7 +67,11 @@ Configuration Configuration::load(const fs::path& path)
   if (document.contains("mesh")) {
     const json& mesh = document["mesh"];
     if (!mesh.is_object()) throw InputError(file + ": \"mesh\" must be an object");
-    requireKnownKeys(mesh, {"resolution_mm", "labels"}, file + ": mesh");
+    requireKnownKeys(mesh, {"resolution_mm", "labels", "backend"}, file + ": mesh");
+    if (mesh.contains("backend")) {
+      if (!mesh["backend"].is_string()) throw InputError(file + ": mesh.backend must be \"lattice\" or \"cgal\"");
+      configuration.meshBackend = mesh["backend"].get<std::string>();
+    }
     if (mesh.contains("resolution_mm")) configuration.meshResolutionMm = number(mesh["resolution_mm"], file + ": mesh.resolution_mm");
     if (mesh.contains("labels")) {
       if (!mesh["labels"].is_array()) throw InputError(file + ": mesh.labels must be a list of labels");
@@ -140,6 +144,9 @@ void Configuration::validate(const std::string& source) const
     throw InputError(source + ": mesh resolution " + std::to_string(meshResolutionMm) + " mm is outside 0.5 to 50 mm");
   }
   if (meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
+  if (meshBackend != "lattice" && meshBackend != "cgal") {
+    throw InputError(source + ": mesh backend \"" + meshBackend + "\" is neither \"lattice\" nor \"cgal\"");
+  }
   for (int label : meshLabels) {
     if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
   }

@@ -19,6 +19,7 @@ struct Configuration {
   std::map<int, Material> materials{{2, {3000.0, 0.45}}, {3, {100.0, 0.3}}, {4, {10000.0, 0.45}}};
   double meshResolutionMm = 3.0;
   std::vector<int> meshLabels{2, 3, 4};
+  std::string meshBackend = "lattice"; ///< "lattice" or "cgal" (CGAL Mesh_3)
   std::string solverOptions; ///< PETSc options over the tuned default
   int ranks = 1;
   /// Tissue classification: k of the k-NN, saturation of the spatial channels, N4 on or off.

@@ -1,5 +1,8 @@
 #include "LabelMapMesher.h"
 
+#include "BoundaryNodeSnapping.h"
+#include "CgalLabelMapMesher.h"
+
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
 #include <vtkIdList.h>
@@ -9,6 +12,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <cstdint>
 #include <array>
 #include <cmath>
 #include <sstream>
@@ -22,6 +26,29 @@ Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b
 Vec cross(const Vec& a, const Vec& b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
 double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 double norm(const Vec& a) { return std::sqrt(dot(a, a)); }
+
+vtkSmartPointer<vtkUnstructuredGrid> toUnstructuredGrid(const TetrahedralMeshArrays& arrays)
+{
+  vtkNew<vtkPoints> points;
+  points->SetDataTypeToDouble();
+  points->SetNumberOfPoints(vtkIdType(arrays.points.size()));
+  for (std::size_t v = 0; v < arrays.points.size(); ++v) points->SetPoint(vtkIdType(v), arrays.points[v].data());
+  vtkNew<vtkCellArray> tetrahedra;
+  vtkNew<vtkIntArray> labelArray;
+  labelArray->SetName("Label");
+  labelArray->SetNumberOfValues(vtkIdType(arrays.labels.size()));
+  for (std::size_t t = 0; t < arrays.tetrahedra.size(); ++t) {
+    const vtkIdType ids[4] = {vtkIdType(arrays.tetrahedra[t][0]), vtkIdType(arrays.tetrahedra[t][1]),
+                              vtkIdType(arrays.tetrahedra[t][2]), vtkIdType(arrays.tetrahedra[t][3])};
+    tetrahedra->InsertNextCell(4, ids);
+    labelArray->SetValue(vtkIdType(t), arrays.labels[t]);
+  }
+  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  mesh->SetPoints(points);
+  mesh->SetCells(VTK_TETRA, tetrahedra);
+  mesh->GetCellData()->AddArray(labelArray);
+  return mesh;
+}
 
 double signedVolume(const Vec p[4]) { return dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0]))) / 6.0; }
 
@@ -80,34 +107,13 @@ void MeshingParameters::validate(const LabelImage& image) const
   if (labels.empty()) throw InputError("meshing: no tissue labels to mesh");
 }
 
-LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& parameters)
+namespace {
+/// The Kuhn lattice of the chosen tissues' index box [lo, hi], labelled, repaired and snapped.
+TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
+                                  const long lo[3], const long hi[3], Warnings& warnings)
 {
-  parameters.validate(image);
-  LabelMapMesh result;
   const auto size = image.GetLargestPossibleRegion().GetSize();
   const LabelPixel* voxels = image.GetBufferPointer();
-  std::set<int> chosen(parameters.labels.begin(), parameters.labels.end());
-  std::map<int, std::size_t> voxelCount;
-  // The bounding box (index space) of the chosen tissues.
-  long lo[3] = {long(size[0]), long(size[1]), long(size[2])}, hi[3] = {-1, -1, -1};
-  for (std::size_t k = 0; k < size[2]; ++k) {
-    for (std::size_t j = 0; j < size[1]; ++j) {
-      for (std::size_t i = 0; i < size[0]; ++i) {
-        const int l = voxels[i + size[0] * (j + size[1] * k)];
-        if (!chosen.count(l)) continue;
-        voxelCount[l] += 1;
-        const long idx[3] = {long(i), long(j), long(k)};
-        for (int d = 0; d < 3; ++d) {
-          lo[d] = std::min(lo[d], idx[d]);
-          hi[d] = std::max(hi[d], idx[d]);
-        }
-      }
-    }
-  }
-  if (voxelCount.empty()) throw InputError("meshing: the label map holds none of the tissues to mesh");
-  for (int l : chosen) {
-    if (!voxelCount.count(l)) throw InputError("meshing: tissue label " + std::to_string(l) + " is not in the label map");
-  }
   // Lattice in continuous index space: steps of h / spacing voxels, covering the box with a margin.
   double step[3];
   long cells[3];
@@ -157,6 +163,34 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
     }
   };
   auto nodeKey = [&](const long q[3]) { return (long long)q[0] + (long long)(cells[0] + 1) * ((long long)q[1] + (long long)(cells[1] + 1) * q[2]); };
+  // The lattice tetrahedron sharing the face opposite corner `f` of tetrahedron `t` (-1 beyond the
+  // lattice). Path (a, b, c): across corner 0 lies path (b, c, a) of the cell + e_a, across corner
+  // 3 path (c, a, b) of the cell - e_c, across corners 1 and 2 the paths (b, a, c) and (a, c, b)
+  // of the same cell.
+  int pathIndex[3][3][3] = {};
+  for (int p = 0; p < 6; ++p) pathIndex[paths[p][0]][paths[p][1]][paths[p][2]] = p;
+  auto neighbourAcross = [&](long long t, int f) -> long long {
+    const long long cell = t / 6;
+    const int* path = paths[t % 6];
+    const int a = path[0], b = path[1], c = path[2];
+    long q[3] = {long(cell % cells[0]), long((cell / cells[0]) % cells[1]), long(cell / ((long long)cells[0] * cells[1]))};
+    int p = 0;
+    if (f == 0) {
+      q[a] += 1;
+      p = pathIndex[b][c][a];
+    } else if (f == 1) {
+      p = pathIndex[b][a][c];
+    } else if (f == 2) {
+      p = pathIndex[a][c][b];
+    } else {
+      q[c] -= 1;
+      p = pathIndex[c][a][b];
+    }
+    for (int d = 0; d < 3; ++d) {
+      if (q[d] < 0 || q[d] >= cells[d]) return -1;
+    }
+    return ((long long)q[0] + (long long)cells[0] * ((long long)q[1] + (long long)cells[1] * q[2])) * 6 + p;
+  };
   for (long long t = 0; t < cellCount * 6; ++t) {
     long corner[4][3];
     cornersOf(t, corner);
@@ -183,27 +217,34 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
         const int l = tissueOf[std::size_t(t)];
         return region == -2 ? l >= 0 : l == region;
       };
-      std::unordered_map<std::string, int> faceCount;
-      auto key3 = [](long long a, long long b, long long c) {
-        long long k[3] = {a, b, c};
-        std::sort(k, k + 3);
-        return std::string(reinterpret_cast<const char*>(k), sizeof(k));
-      };
+      // A face of a tetrahedron in the region is on the region's boundary when the lattice
+      // tetrahedron across it is not in the region; edges of three or more such faces are
+      // non-manifold. Edges are keyed by their two node keys in one 64-bit integer.
+      std::unordered_map<std::uint64_t, int> edgeCount;
       for (long long t = 0; t < cellCount * 6; ++t) {
         if (!inRegion(t)) continue;
         long corner[4][3];
-        cornersOf(t, corner);
-        for (const auto& f : faceCorners) faceCount[key3(nodeKey(corner[f[0]]), nodeKey(corner[f[1]]), nodeKey(corner[f[2]]))] += 1;
+        bool cornersKnown = false;
+        for (int f = 0; f < 4; ++f) {
+          const long long across = neighbourAcross(t, f);
+          if (across >= 0 && inRegion(across)) continue;
+          if (!cornersKnown) {
+            cornersOf(t, corner);
+            cornersKnown = true;
+          }
+          for (int e = 0; e < 3; ++e) {
+            const long long u = nodeKey(corner[faceCorners[f][e]]), w = nodeKey(corner[faceCorners[f][(e + 1) % 3]]);
+            edgeCount[(std::uint64_t(std::min(u, w)) << 32) | std::uint64_t(std::max(u, w))] += 1;
+          }
+        }
       }
-      std::map<std::pair<long long, long long>, int> edgeCount;
-      for (const auto& [k, count] : faceCount) {
-        if (count != 1) continue;
-        long long v[3];
-        std::memcpy(v, k.data(), sizeof(v));
-        for (int e = 0; e < 3; ++e) edgeCount[{std::min(v[e], v[(e + 1) % 3]), std::max(v[e], v[(e + 1) % 3])}] += 1;
+      std::vector<std::uint64_t> nonManifold;
+      for (const auto& [key, count] : edgeCount) {
+        if (count > 2) nonManifold.push_back(key);
       }
-      for (const auto& [edge, count] : edgeCount) {
-        if (count <= 2) continue;
+      std::sort(nonManifold.begin(), nonManifold.end()); // a fixed order: the repairs depend on it
+      for (std::uint64_t key : nonManifold) {
+        const std::pair<long long, long long> edge{(long long)(key >> 32), (long long)(key & 0xffffffffu)};
         // The lattice tetrahedra around the edge, in the cells that hold both of its ends.
         auto decode = [&](long long k, long q[3]) {
           q[0] = long(k % (cells[0] + 1));
@@ -261,38 +302,88 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
     }
     if (!changed) break;
     if (pass == 29) {
-      result.warnings.push_back("mesh: the topology repair did not settle in 30 passes; some surfaces may stay non-manifold");
+      warnings.push_back("mesh: the topology repair did not settle in 30 passes; some surfaces may stay non-manifold");
     }
   }
   if (repaired > 0) {
-    result.warnings.push_back("mesh: " + std::to_string(repaired) +
+    warnings.push_back("mesh: " + std::to_string(repaired) +
                               " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
   }
 
-  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
-  vtkNew<vtkCellArray> tetrahedra;
-  vtkNew<vtkIntArray> labelArray;
-  labelArray->SetName("Label");
+  TetrahedralMeshArrays arrays;
   for (long long t = 0; t < cellCount * 6; ++t) {
     const int tissue = tissueOf[std::size_t(t)];
     if (tissue < 0) continue;
     long corner[4][3];
     cornersOf(t, corner);
-    vtkIdType ids[4];
+    std::array<long long, 4> ids;
     Vec p[4];
     for (int v = 0; v < 4; ++v) {
-      ids[v] = node(corner[v][0], corner[v][1], corner[v][2]);
-      points->GetPoint(ids[v], p[v].data());
+      ids[std::size_t(v)] = node(corner[v][0], corner[v][1], corner[v][2]);
+      points->GetPoint(ids[std::size_t(v)], p[v].data());
     }
     if (signedVolume(p) < 0) std::swap(ids[2], ids[3]); // the image's direction may mirror the lattice
-    tetrahedra->InsertNextCell(4, ids);
-    labelArray->InsertNextValue(tissue);
+    arrays.tetrahedra.push_back(ids);
+    arrays.labels.push_back(tissue);
   }
-  mesh->SetPoints(points);
-  mesh->SetCells(VTK_TETRA, tetrahedra);
-  mesh->GetCellData()->AddArray(labelArray);
-  result.mesh = mesh;
-  result.quality = measureMeshQuality(mesh, &image);
+  arrays.points.resize(std::size_t(points->GetNumberOfPoints()));
+  for (vtkIdType v = 0; v < points->GetNumberOfPoints(); ++v) points->GetPoint(v, arrays.points[std::size_t(v)].data());
+  if (parameters.snapToBoundaries) {
+    SnappingParameters snapping;
+    snapping.minimumDihedralDegrees = parameters.minimumDihedralDegrees;
+    const std::vector<int> tissues(chosen.begin(), chosen.end());
+    const SnappingSummary s = snapInterfaceNodes(arrays, image, tissues, snapping);
+      if (s.nodesPartlyMoved > s.interfaceNodes / 10) {
+      warnings.push_back("mesh: " + std::to_string(s.nodesPartlyMoved) + " of " + std::to_string(s.interfaceNodes) +
+                                " interface nodes stopped short of the tissue boundary to keep the elements' quality");
+    }
+  }
+  return arrays;
+}
+} // namespace
+
+#ifndef BRAINSHIFT_HAVE_CGAL
+bool cgalMeshingAvailable() { return false; }
+
+TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage&, const MeshingParameters&)
+{
+  throw NotAvailableError("meshing: the CGAL backend is not available: BrainShift was built without CGAL");
+}
+#endif
+
+LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& parameters)
+{
+  parameters.validate(image);
+  LabelMapMesh result;
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
+  std::set<int> chosen(parameters.labels.begin(), parameters.labels.end());
+  std::map<int, std::size_t> voxelCount;
+  // The bounding box (index space) of the chosen tissues.
+  long lo[3] = {long(size[0]), long(size[1]), long(size[2])}, hi[3] = {-1, -1, -1};
+  for (std::size_t k = 0; k < size[2]; ++k) {
+    for (std::size_t j = 0; j < size[1]; ++j) {
+      for (std::size_t i = 0; i < size[0]; ++i) {
+        const int l = voxels[i + size[0] * (j + size[1] * k)];
+        if (!chosen.count(l)) continue;
+        voxelCount[l] += 1;
+        const long idx[3] = {long(i), long(j), long(k)};
+        for (int d = 0; d < 3; ++d) {
+          lo[d] = std::min(lo[d], idx[d]);
+          hi[d] = std::max(hi[d], idx[d]);
+        }
+      }
+    }
+  }
+  if (voxelCount.empty()) throw InputError("meshing: the label map holds none of the tissues to mesh");
+  for (int l : chosen) {
+    if (!voxelCount.count(l)) throw InputError("meshing: tissue label " + std::to_string(l) + " is not in the label map");
+  }
+  const TetrahedralMeshArrays arrays = parameters.backend == MeshingBackend::Cgal
+                                           ? meshLabelMapWithCgal(image, parameters)
+                                           : latticeMesh(image, parameters, chosen, lo, hi, result.warnings);
+  result.mesh = toUnstructuredGrid(arrays);
+  result.quality = measureMeshQuality(result.mesh, &image);
   for (int l : chosen) {
     if (!result.quality.meshVolumeMl.count(l)) {
       throw InputError("meshing: tissue label " + std::to_string(l) + " (" + std::to_string(result.quality.voxelVolumeMl[l]) +

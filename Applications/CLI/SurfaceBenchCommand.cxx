@@ -4,6 +4,7 @@
 #include "AtomicFile.h"
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
+#include "Commands.h"
 #include "DistanceMaps.h"
 #include "LabelMapMesher.h"
 #include "RigidRegistrationLogic.h"
@@ -199,10 +200,10 @@ void runSurfaceBench(const SurfaceBenchOptions& o)
 
 } // namespace
 
-void addSurfaceBench(CLI::App* bench)
+void addSurfaceBenchCommand(CLI::App& bench)
 {
   auto o = std::make_shared<SurfaceBenchOptions>();
-  CLI::App* command = bench->add_subcommand(
+  CLI::App* command = bench.add_subcommand(
     "surface", "Active surface: error against the truth by shift size and by corrupted brain masks, and its speed");
   command->add_option("--output-dir", o->outputDir, "where the measurements go")->required();
   command->add_option("--size", o->size, "full or small case")->capture_default_str();
