@@ -13,8 +13,7 @@
 // The CGAL Mesh_3 backend (CgalLabelMapMesher.h) gives the same output: LPS mm, cell array Label,
 // only the chosen tissues, positive tetrahedra.
 //
-// Not yet (issue 5): graded resolution; CGAL's sliver exudation (off: not reproducible in CGAL
-// 5.5, so its meshes keep slivers) and CGAL on the full brain in reasonable time.
+// Not yet (issue 5): graded resolution.
 #include "BrainShiftErrors.h"
 #include "ImageTypes.h"
 
