@@ -461,6 +461,24 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
     if (edges) {
       const double step = 0.5; // the crossing is interpolated within a step
       const Vec indexStep = toIndex.matrix * direction * step;
+      // The expected contrast checks the segmentation: across its boundary the mean intensity of a
+      // few mm inside and of a few mm outside must differ as brain and its surroundings do (a
+      // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
+      // here (grown into fluid, or eroded into brain) and the image alone decides.
+      signed char& known = plausible[std::size_t(node)];
+      if (refreshPlausibility || known < 0) {
+        double inside = 0, outside = 0;
+        int count = 0;
+        for (double at = 1.0; at <= 4.0; at += step, ++count) {
+          inside += edges->intensity->value(index + ((target - at) / step) * indexStep);
+          outside += edges->intensity->value(index + ((target + at) / step) * indexStep);
+        }
+        known = edges->insideSign * (inside - outside) / double(count) > p.minimumContrastFraction * edges->contrast;
+      }
+      const bool segmentationPlausible = known == 1;
+      if (segmentationPlausible && !(p.imageWeight > 0)) {
+        return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction; // no edge needed
+      }
       // The image's edge nearest to the node: inside-like to outside-like along the normal.
       const int samples = int(std::lround(p.imageSearchMm / step));
       double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
@@ -477,21 +495,6 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
         previous = g;
       }
       const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
-      // The expected contrast checks the segmentation: across its boundary the mean intensity of a
-      // few mm inside and of a few mm outside must differ as brain and its surroundings do (a
-      // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
-      // here (grown into fluid, or eroded into brain) and the image alone decides.
-      signed char& known = plausible[std::size_t(node)];
-      if (refreshPlausibility || known < 0) {
-        double inside = 0, outside = 0;
-        int count = 0;
-        for (double at = 1.0; at <= 4.0; at += step, ++count) {
-          inside += edges->intensity->value(index + ((target - at) / step) * indexStep);
-          outside += edges->intensity->value(index + ((target + at) / step) * indexStep);
-        }
-        known = edges->insideSign * (inside - outside) / double(count) > p.minimumContrastFraction * edges->contrast;
-      }
-      const bool segmentationPlausible = known == 1;
       if (segmentationPlausible) {
         if (p.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p.imageTrustMm) {
           target = (1 - p.imageWeight) * target + p.imageWeight * edgeAt;

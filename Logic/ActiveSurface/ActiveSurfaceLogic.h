@@ -51,7 +51,7 @@ struct ActiveSurfaceParameters {
   double maximumStepMm = 2.0;        ///< the external force's pull per iteration is capped here
   unsigned maximumIterations = 200;
   unsigned restSmoothingIterations = 10; ///< Taubin passes that take the staircase off the rest shape
-  double convergenceMm = 0.01;       ///< 95th percentile of the node movements in a step: converged
+  double convergenceMm = 0.02;       ///< 95th percentile of the node movements in a step: converged
   double distanceSmoothingMm = 1.0;  ///< Gaussian sigma on the distance map (removes staircasing)
   /// Share of the image's edge in the target where the segmentation looks right (0: the
   /// segmentation alone there; measured best on the built-in case, Testing/Benchmarks/surface).

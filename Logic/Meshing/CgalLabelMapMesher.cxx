@@ -92,7 +92,7 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
   double finest = std::min({double(spacing[0]), double(spacing[1]), double(spacing[2])});
   // The surface may stray a quarter of the resolution from the boundary (half a voxel at least):
   // the lattice's snapping stays within about that, and finer tolerances refine every sulcus.
-  const Criteria criteria(p::facet_angle = 25, p::facet_size = h, p::facet_distance = 0.5 * finest,
+  const Criteria criteria(p::facet_angle = 25, p::facet_size = h, p::facet_distance = std::max(0.5 * finest, 0.25 * h),
                           p::cell_radius_edge_ratio = 3, p::cell_size = h);
   // Perturbation and sliver exudation without time limits (a time limit would make the result
   // depend on the machine's speed), both drawing from the seeded generator. No manifold(): with
