@@ -61,6 +61,25 @@ RunContext::RunContext(RunOptions options, Configuration configuration, RunRepor
 {
 }
 
+const std::vector<LoadedOverlay>& RunContext::overlays()
+{
+  if (!overlays_) {
+    if (inputs_) {
+      overlays_ = inputs_->overlays;
+    } else {
+      std::vector<LoadedOverlay> loaded;
+      for (const std::string& overlay : options_.overlays) {
+        const OverlayInput input = parseOverlayArgument(overlay);
+        Warnings warnings;
+        loaded.push_back({input.name, readScalarVolume(input.file, &warnings)});
+        report_.addWarnings(warnings);
+      }
+      overlays_ = std::move(loaded);
+    }
+  }
+  return *overlays_;
+}
+
 void RunContext::loadAllInputs()
 {
   RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, options_.intraopImage, {}};
@@ -124,7 +143,7 @@ const std::vector<PipelineStage>& pipelineStages()
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
      runSimulateStage},
     {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "
-             "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", nullptr},
+             "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", runWarpStage},
   };
   return stages;
 }

@@ -39,6 +39,8 @@ public:
   /// The labels when given, else null.
   const LabelImage* preopLabelsIfGiven();
   const LabelImage& preopLabels(const std::string& stage);
+  /// The --overlay volumes, read and checked once.
+  const std::vector<LoadedOverlay>& overlays();
 
 private:
   RunOptions options_;
@@ -47,6 +49,7 @@ private:
   std::optional<RegistrationInputs> inputs_;
   ScalarImage::Pointer preopImage_, intraopImage_;
   LabelImage::Pointer preopLabels_;
+  std::optional<std::vector<LoadedOverlay>> overlays_;
 };
 
 /// A stage of the intraoperative update, as the command line runs it.
@@ -71,5 +74,6 @@ void runClassifyStage(RunContext& context);
 void runSimulateStage(RunContext& context);
 void runMeshStage(RunContext& context);
 void runSurfaceStage(RunContext& context);
+void runWarpStage(RunContext& context);
 
 } // namespace brainshift::cli

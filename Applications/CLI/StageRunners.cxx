@@ -1,6 +1,16 @@
 // The stages as the command line runs them: inputs from the run context, the stage's logic, its
 // files in the output folder, its entry in report.json.
 #include "ActiveSurfaceLogic.h"
+#include "DeformationField.h"
+#include "ModelNode.h"
+#include "SceneIO.h"
+#include "TransformNode.h"
+#include "VolumeNodes.h"
+
+#include <itkCompositeTransform.h>
+
+#include <tuple>
+#include <type_traits>
 #include "BiomechanicalModel.h"
 #include "BrainShiftErrors.h"
 #include "FiniteElementSolver.h"
@@ -239,6 +249,136 @@ void runSurfaceStage(RunContext& context)
   std::printf("  surface: %zu nodes (%zu imposed), %u iterations, residual %.2f mm mean (from %.2f), displacement up to %.1f mm, %.2f s\n",
               result.surfaceNodes, result.imposedNodes, result.iterations, result.meanResidualMm, result.initialMeanResidualMm,
               result.maxDisplacementMm, clock.seconds());
+}
+
+} // namespace brainshift::cli
+
+namespace brainshift::cli {
+
+namespace {
+/// The update as a 3D Slicer scene beside its files: the intraoperative scan in the world, the
+/// warped volumes on it, the preoperative image under the whole transform (Slicer warps it live),
+/// the brain surface coloured by its displacement under the rigid transform (the model frame).
+void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>>& warpedScalars,
+                      const fs::path& warpedLabelsFile, const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigidTransform,
+                      const SpatialTransform::Pointer& wholeTransform, vtkSmartPointer<vtkPolyData> brainSurface)
+{
+  Scene scene;
+  auto stored = [](auto node, const fs::path& file) {
+    node->setStorageFile(fs::absolute(file));
+    node->markStored();
+    return node;
+  };
+  const RunOptions& o = context.options();
+  // The data are in memory already; the nodes only point at their files.
+  auto shared = [](const auto& image) { return typename std::remove_cv_t<std::remove_reference_t<decltype(image)>>::Pointer(const_cast<std::remove_cv_t<std::remove_reference_t<decltype(image)>>*>(&image)); };
+  auto rigid = scene.add(stored(TransformNode::create("rigid intraop_to_preop", rigidTransform), context.output("rigid_intraop_to_preop.tfm")));
+  auto whole = scene.add(stored(TransformNode::create("intraop_to_preop", wholeTransform), context.output("intraop_to_preop.h5")));
+  auto intraop = scene.add(stored(ScalarVolumeNode::create("intraop image", shared(context.intraopImage("warp"))), o.intraopImage));
+  intraop->setRole("intraop");
+  for (const auto& [name, file, image] : warpedScalars) {
+    auto node = scene.add(stored(ScalarVolumeNode::create(name, image), file));
+    node->setRole(name == "warped preop image" ? "preop" : "overlay");
+    if (name != "warped preop image") {
+      VolumeDisplay statistics;
+      statistics.colorTable = "ColdToHotRainbow";
+      statistics.window = 16.0;
+      statistics.level = 0.0;
+      statistics.lowerThreshold = 3.0;
+      statistics.upperThreshold = 100.0;
+      node->setDisplay(statistics);
+    }
+  }
+  auto labels = scene.add(stored(LabelMapVolumeNode::create("warped preop labels", warpedLabels), warpedLabelsFile));
+  labels->setRole("preop");
+  auto preop = scene.add(stored(ScalarVolumeNode::create("preop image", shared(context.preopImage("warp"))), o.preopImage));
+  preop->setRole("preop");
+  preop->setParentTransformId(whole->id());
+  auto surface = scene.add(stored(ModelNode::create("brain surface", brainSurface), context.output("brain_surface.vtp")));
+  ModelDisplay display;
+  display.scalarVisibility = true;
+  display.activeScalarName = "DisplacementMagnitude";
+  display.colorTable = "ColdToHotRainbow";
+  surface->setDisplay(display);
+  surface->setParentTransformId(rigid->id());
+  writeScene(scene, context.output("scene.mrml"));
+}
+} // namespace
+
+void runWarpStage(RunContext& context)
+{
+  Stopwatch clock;
+  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm"),
+                 surfaceFile = context.output("brain_surface.vtp");
+  for (const auto& [needed, stage] : {std::pair<fs::path, const char*>{rigidFile, "rigid"}, {meshFile, "mesh"}, {surfaceFile, "surface"}}) {
+    std::error_code ec;
+    if (!fs::exists(needed, ec)) {
+      throw InputError(needed.string() + ": not found; run `brainshift " + stage + "` on this output folder first");
+    }
+  }
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  const ScalarImage& intraop = context.intraopImage("warp");
+  const ScalarImage& preopImage = context.preopImage("warp");
+  const LabelImage& preopLabels = context.preopLabels("warp");
+  const std::vector<LoadedOverlay>& overlays = context.overlays();
+  const double readSeconds = clock.seconds();
+
+  Stopwatch fieldClock;
+  const DeformationField deformation =
+    intraopToPreopField(mesh, *rigid, ImageGeometry::of(&intraop), DeformationFieldParameters{}, meshFile.string());
+  const double fieldSeconds = fieldClock.seconds();
+  Stopwatch warpClock;
+  const ScalarImage::Pointer warpedImage = warpScalarVolume(preopImage, *deformation.field);
+  const LabelImage::Pointer warpedLabels = warpLabelVolume(preopLabels, *deformation.field);
+  std::vector<std::pair<std::string, ScalarImage::Pointer>> warpedOverlays;
+  for (const LoadedOverlay& overlay : overlays) warpedOverlays.emplace_back(overlay.name, warpScalarVolume(*overlay.image, *deformation.field));
+  const double warpSeconds = warpClock.seconds();
+
+  // Files: the field, the transform, the warped volumes; then the scene that points at them.
+  Stopwatch writeClock;
+  writeDisplacementField(deformation.field, context.output("displacement_intraop_to_preop.nrrd"));
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  composite->AddTransform(makeDisplacementFieldTransform(deformation.field));
+  writeTransform(composite, context.output("intraop_to_preop.h5"));
+  std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
+    {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
+  writeScalarVolume(warpedImage, context.output("warped_preop_image.nii.gz"));
+  writeLabelVolume(warpedLabels, context.output("warped_preop_labels.nii.gz"));
+  for (const auto& [name, image] : warpedOverlays) {
+    scalars.emplace_back("warped " + name, context.output("warped_" + name + ".nii.gz"), image);
+    writeScalarVolume(image, context.output("warped_" + name + ".nii.gz"));
+  }
+  vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
+  writeUpdateScene(context, scalars, context.output("warped_preop_labels.nii.gz"), warpedLabels, rigid,
+                   SpatialTransform::Pointer(composite.GetPointer()), brainSurface);
+  const double writeSeconds = writeClock.seconds();
+
+  context.report().setStage("warp", {{"wall_seconds", clock.seconds()},
+                                     {"voxels", deformation.voxels},
+                                     {"mesh_voxels", deformation.meshVoxels},
+                                     {"folded_voxels", deformation.foldedVoxels},
+                                     {"min_jacobian_determinant", deformation.minimumJacobian},
+                                     {"inverted_deformed_tetrahedra", deformation.invertedDeformedTetrahedra},
+                                     {"max_non_rigid_mm", deformation.maximumNonRigidMm},
+                                     {"fallback_sigma_mm", deformation.fallbackSigmaMm},
+                                     {"volumes_warped", 2 + warpedOverlays.size()},
+                                     {"read_seconds", readSeconds},
+                                     {"field_seconds", fieldSeconds},
+                                     {"locate_seconds", deformation.locateSeconds},
+                                     {"fallback_seconds", deformation.fallbackSeconds},
+                                     {"jacobian_seconds", deformation.jacobianSeconds},
+                                     {"warp_seconds", warpSeconds},
+                                     {"write_seconds", writeSeconds}});
+  if (deformation.foldedVoxels > 0) {
+    context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
+                                  " voxels where the deformation folds (Jacobian determinant <= 0)"});
+  }
+  std::printf("  warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, files %.2f s\n", deformation.voxels,
+              deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, writeSeconds);
 }
 
 } // namespace brainshift::cli

@@ -1,0 +1,50 @@
+#pragma once
+// The resampling transform of the intraoperative update on the intraoperative grid: for each
+// intraoperative voxel y, the preoperative point x = y + d(y) it shows (../shared/CONTRACT.md).
+//
+// y is first brought into the model frame by the rigid transform, p = R(y). The finite element
+// solution maps each preoperative point X of the mesh to its deformed place X + u(X), piecewise
+// linearly over the tetrahedra; its inverse is exact: p is located in the deformed tetrahedron that
+// holds it, and its barycentric coordinates there give X = sum lambda_k X_k. Outside the deformed
+// mesh the non-rigid correction X - p fades smoothly to zero (a normalised Gaussian extension of the
+// correction from the mesh, about `fallbackSigmaMm` wide), so far from the brain the mapping is the
+// rigid one. The Jacobian determinant of y -> x flags folding (<= 0).
+#include "BrainShiftErrors.h"
+#include "ImageTypes.h"
+#include "TransformIO.h"
+
+#include <vtkUnstructuredGrid.h>
+
+#include <string>
+
+namespace brainshift {
+
+struct DeformationFieldParameters {
+  /// The fade's width; it grows with the largest correction on the mesh's boundary (at least
+  /// 1.2 times it), so that the fade does not fold the space between the brain and the skull.
+  double fallbackSigmaMm = 4.0;
+};
+
+struct DeformationField {
+  DisplacementFieldImage::Pointer field; ///< x = y + d(y), LPS mm, rigid part included
+  ScalarImage::Pointer jacobianDeterminant;
+  std::size_t voxels = 0, meshVoxels = 0, foldedVoxels = 0;
+  std::size_t invertedDeformedTetrahedra = 0; ///< tetrahedra the displacement turned inside out
+  double minimumJacobian = 0, maximumNonRigidMm = 0;
+  double fallbackSigmaMm = 0; ///< the fade's width used
+  double locateSeconds = 0, fallbackSeconds = 0, jacobianSeconds = 0;
+};
+
+/// `mesh`: mesh.vtu after the solve (point array "Displacement", preoperative frame). InputError
+/// naming `meshName` when the mesh has no displacement or non-tetrahedral cells.
+DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTransform& rigidIntraopToPreop,
+                                     const ImageGeometry& intraopGrid, const DeformationFieldParameters& parameters,
+                                     const std::string& meshName = "the mesh");
+
+/// `moving` (a preoperative volume) resampled on the field's grid at y + d(y): linearly (no
+/// clipping: statistics keep their sign and size), 0 outside.
+ScalarImage::Pointer warpScalarVolume(const ScalarImage& moving, const DisplacementFieldImage& field);
+/// The same by nearest neighbour, for label maps.
+LabelImage::Pointer warpLabelVolume(const LabelImage& moving, const DisplacementFieldImage& field);
+
+} // namespace brainshift
