@@ -17,6 +17,18 @@ struct VolumeDisplay {
   std::optional<double> lowerThreshold; ///< overlays: values between the thresholds are hidden
   std::optional<double> upperThreshold;
   double opacity = 1.0;
+
+  /// A statistical map (fMRI t-values) over an anatomy: a hot/cold colour scale, |t| < 3 hidden.
+  static VolumeDisplay statisticalMap()
+  {
+    VolumeDisplay d;
+    d.colorTable = "ColdToHotRainbow";
+    d.window = 16.0;
+    d.level = 0.0;
+    d.lowerThreshold = 3.0;
+    d.upperThreshold = 100.0;
+    return d;
+  }
 };
 
 class ScalarVolumeNode : public Node {

@@ -74,13 +74,7 @@ void writeCaseScene(const SimulatedCase& simulated, const CaseFiles& files)
   labels->setParentTransformId(truth->id());
   auto fmri = scene.add(stored(ScalarVolumeNode::create("preop fmri", simulated.preopFmri), files.preopFmri));
   fmri->setRole("overlay");
-  VolumeDisplay statistics;
-  statistics.colorTable = "ColdToHotRainbow";
-  statistics.window = 16.0;
-  statistics.level = 0.0;
-  statistics.lowerThreshold = 3.0;
-  statistics.upperThreshold = 100.0;
-  fmri->setDisplay(statistics);
+  fmri->setDisplay(VolumeDisplay::statisticalMap());
   fmri->setParentTransformId(truth->id());
   auto truthLabels = scene.add(stored(LabelMapVolumeNode::create("truth intraop labels", simulated.intraopLabels), files.truthIntraopLabels));
   truthLabels->setRole("truth");

@@ -279,15 +279,7 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   for (const auto& [name, file, image] : warpedScalars) {
     auto node = scene.add(stored(ScalarVolumeNode::create(name, image), file));
     node->setRole(name == "warped preop image" ? "preop" : "overlay");
-    if (name != "warped preop image") {
-      VolumeDisplay statistics;
-      statistics.colorTable = "ColdToHotRainbow";
-      statistics.window = 16.0;
-      statistics.level = 0.0;
-      statistics.lowerThreshold = 3.0;
-      statistics.upperThreshold = 100.0;
-      node->setDisplay(statistics);
-    }
+    if (name != "warped preop image") node->setDisplay(VolumeDisplay::statisticalMap());
   }
   auto labels = scene.add(stored(LabelMapVolumeNode::create("warped preop labels", warpedLabels), warpedLabelsFile));
   labels->setRole("preop");
