@@ -462,6 +462,7 @@ void addBenchCommand(CLI::App& app)
   classifyCommand->add_option("--runs", classify->runs, "timed runs on the default case")->capture_default_str();
   classifyCommand->add_option("--seed", classify->seed, "seed of the cases")->capture_default_str();
   addSurfaceBenchCommand(*bench);
+  addUpdateBenchCommand(*bench);
 
   auto simulate = std::make_shared<SimulateBenchOptions>();
   CLI::App* simulateCommand = bench->add_subcommand(

@@ -29,5 +29,6 @@ void addStageCommands(CLI::App& app);
 void addBenchCommand(CLI::App& app);
 void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.cxx
 void addSurfaceBenchCommand(CLI::App& bench); ///< `bench surface`, SurfaceBenchCommand.cxx
+void addUpdateBenchCommand(CLI::App& bench);  ///< `bench update`, UpdateBenchCommand.cxx
 
 } // namespace brainshift::cli

@@ -32,7 +32,7 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
                         "points named by tissue (parenchyma-1, ventricles-2, ...); default: chosen automatically");
   }
   if (meshFlags) {
-    command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 3)");
+    command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 4)");
     command->add_option("--mesh-backend", options.meshBackend,
                         "lattice (Kuhn lattice, boundary nodes snapped; default) or cgal (CGAL Mesh_3)");
   }

@@ -221,6 +221,8 @@ WarpStage)
   expect 2 "no such file" -- "$brainshift" warp --preop-image "$out/none.nii.gz" --preop-labels "$L" --intraop-image "$I" \
     --output-dir "$out"
   expect 2 "" -- "$brainshift" bench
+  expect 2 "--mesh-resolutions" -- "$brainshift" bench update --output-dir "$out/bench" --mesh-resolutions 0.1
+  expect 2 "--methods" -- "$brainshift" bench surface --output-dir "$out/bench" --methods nonsense
   ;;
 
 DemoRefusesForeignFolder)

@@ -13,7 +13,7 @@ int ConfigurationTest(int, char*[])
     const Configuration defaults;
     BS_CHECK_NEAR(defaults.materials.at(2).youngsModulusPa, 3000.0, 0);
     BS_CHECK_NEAR(defaults.materials.at(2).poissonRatio, 0.45, 0);
-    BS_CHECK_NEAR(defaults.meshResolutionMm, 3.0, 0);
+    BS_CHECK_NEAR(defaults.meshResolutionMm, 4.0, 0);
 
     // The default configuration shipped in Resources/ is the built-in one, and valid.
     const Configuration shipped = Configuration::load(BRAINSHIFT_DEFAULT_CONFIGURATION);
