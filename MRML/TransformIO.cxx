@@ -117,7 +117,8 @@ void writeTransform(const SpatialTransform* transform, const fs::path& path)
   }
   auto writer = itk::TransformFileWriterTemplate<double>::New();
   writer->SetInput(transform);
-  writeAtomically(writer.GetPointer(), path);
+  // Linear transforms are tiny; a field transform's doubles hardly compress (seconds for a few %).
+  writeAtomically(writer.GetPointer(), path, isLinearTransform(transform));
 }
 
 bool isLinearTransform(const SpatialTransform* transform)

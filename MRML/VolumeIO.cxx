@@ -319,7 +319,7 @@ void checkSliceSpacing(const fs::path& folder, const std::vector<std::string>& f
 }
 
 template <class TOutputPixel, class TInputImage>
-void writeAs(const TInputImage* image, const fs::path& path)
+void writeAs(const TInputImage* image, const fs::path& path, bool compress = true)
 {
   using OutputImage = itk::Image<TOutputPixel, 3>;
   auto writer = itk::ImageFileWriter<OutputImage>::New();
@@ -342,7 +342,7 @@ void writeAs(const TInputImage* image, const fs::path& path)
     }
   }
   writer->SetInput(converted);
-  writeAtomically(writer.GetPointer(), path);
+  writeAtomically(writer.GetPointer(), path, compress);
 }
 
 } // namespace
@@ -468,7 +468,10 @@ void writeLabelVolume(const LabelImage* image, const fs::path& path)
 void writeDisplacementField(const DisplacementFieldImage* field, const fs::path& path)
 {
   registerIOFactories();
-  writeAs<DisplacementVector>(field, path);
+  // Only a .gz name asks for compression; a field's floats hardly compress.
+  const std::string name = lowerCaseFileName(path);
+  const bool gzipped = name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0;
+  writeAs<DisplacementVector>(field, path, gzipped);
 }
 
 } // namespace brainshift
