@@ -13,6 +13,8 @@
 #include <algorithm>
 #include <cstring>
 #include <cstdint>
+#include <numeric>
+#include <string>
 #include <array>
 #include <cmath>
 #include <sstream>
@@ -340,6 +342,66 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
   }
   return arrays;
 }
+/// Keeps the largest face-connected part of the mesh. Parts that are detached (a fragment of the
+/// label map) or joined to it only at a node or along an edge (a lattice tetrahedron hanging at a
+/// corner) would move, or turn about that node or edge, at no cost: the stiffness matrix would be
+/// singular wherever such a part has no imposed node. They are dropped, with their nodes, and
+/// counted in a warning.
+void keepLargestFaceConnectedPart(TetrahedralMeshArrays& arrays, Warnings& warnings)
+{
+  const std::size_t n = arrays.tetrahedra.size();
+  std::vector<std::size_t> parent(n);
+  std::iota(parent.begin(), parent.end(), std::size_t(0));
+  auto find = [&](std::size_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  };
+  static const int faces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  std::unordered_map<std::string, std::size_t> firstWithFace;
+  firstWithFace.reserve(2 * n);
+  for (std::size_t t = 0; t < n; ++t) {
+    for (const auto& f : faces) {
+      std::array<long long, 3> key{arrays.tetrahedra[t][std::size_t(f[0])], arrays.tetrahedra[t][std::size_t(f[1])],
+                                   arrays.tetrahedra[t][std::size_t(f[2])]};
+      std::sort(key.begin(), key.end());
+      const auto [at, inserted] = firstWithFace.emplace(std::string(reinterpret_cast<const char*>(key.data()), sizeof(key)), t);
+      if (!inserted) {
+        const std::size_t a = find(t), b = find(at->second);
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      }
+    }
+  }
+  std::unordered_map<std::size_t, std::size_t> partSize;
+  for (std::size_t t = 0; t < n; ++t) partSize[find(t)] += 1;
+  if (partSize.size() <= 1) return;
+  std::size_t largest = 0, largestSize = 0;
+  for (const auto& [root, size] : partSize) {
+    if (size > largestSize || (size == largestSize && root < largest)) {
+      largest = root;
+      largestSize = size;
+    }
+  }
+  TetrahedralMeshArrays kept;
+  std::vector<long long> newIndex(arrays.points.size(), -1);
+  for (std::size_t t = 0; t < n; ++t) {
+    if (find(t) != largest) continue;
+    std::array<long long, 4> ids = arrays.tetrahedra[t];
+    for (long long& v : ids) {
+      if (newIndex[std::size_t(v)] < 0) {
+        newIndex[std::size_t(v)] = (long long)kept.points.size();
+        kept.points.push_back(arrays.points[std::size_t(v)]);
+      }
+      v = newIndex[std::size_t(v)];
+    }
+    kept.tetrahedra.push_back(ids);
+    kept.labels.push_back(arrays.labels[t]);
+  }
+  warnings.push_back("mesh: " + std::to_string(n - largestSize) + " tetrahedra in " + std::to_string(partSize.size() - 1) +
+                     " parts not joined to the mesh by a face (detached, or touching it at a node or along an edge) were dropped: "
+                     "nothing would hold them in the elastic model");
+  arrays = std::move(kept);
+}
+
 } // namespace
 
 #ifndef BRAINSHIFT_HAVE_CGAL
@@ -379,9 +441,10 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
   for (int l : chosen) {
     if (!voxelCount.count(l)) throw InputError("meshing: tissue label " + std::to_string(l) + " is not in the label map");
   }
-  const TetrahedralMeshArrays arrays = parameters.backend == MeshingBackend::Cgal
-                                           ? meshLabelMapWithCgal(image, parameters)
-                                           : latticeMesh(image, parameters, chosen, lo, hi, result.warnings);
+  TetrahedralMeshArrays arrays = parameters.backend == MeshingBackend::Cgal
+                                     ? meshLabelMapWithCgal(image, parameters)
+                                     : latticeMesh(image, parameters, chosen, lo, hi, result.warnings);
+  keepLargestFaceConnectedPart(arrays, result.warnings);
   result.mesh = toUnstructuredGrid(arrays);
   result.quality = measureMeshQuality(result.mesh, &image);
   for (int l : chosen) {

@@ -116,6 +116,35 @@ int LabelMapMesherTest(int, char*[])
       }
     }
 
+    // A detached fragment of parenchyma (a 6 mm cube in a corner) is not part of the model: no
+    // boundary condition would hold it, and the stiffness matrix would be singular. It is dropped,
+    // with a warning, and the mesh is the sphere alone.
+    {
+      const LabelImage::Pointer withFragment = phantom();
+      for (int k = 66; k < 72; ++k) {
+        for (int j = 66; j < 72; ++j) {
+          for (int i = 66; i < 72; ++i) {
+            LabelImage::IndexType voxel;
+            voxel[0] = i;
+            voxel[1] = j;
+            voxel[2] = k;
+            withFragment->SetPixel(voxel, 2);
+          }
+        }
+      }
+      MeshingParameters parameters;
+      parameters.resolutionMm = 2.0;
+      const LabelMapMesh clean = meshLabelMap(*labels, parameters);
+      const LabelMapMesh mesh = meshLabelMap(*withFragment, parameters);
+      bool warned = false;
+      for (const std::string& w : mesh.warnings) warned = warned || w.find("were dropped") != std::string::npos;
+      for (const std::string& w : clean.warnings) BS_CHECK_MSG(w.find("were dropped") == std::string::npos, w);
+      BS_CHECK(warned);
+      BS_CHECK_MSG(mesh.quality.nodes == clean.quality.nodes && mesh.quality.tetrahedra == clean.quality.tetrahedra,
+                   mesh.quality.nodes << " nodes against " << clean.quality.nodes);
+      BS_CHECK(checkSurface(boundarySurface(mesh.mesh, {2, 3, 4})).closed);
+    }
+
     // The built-in brain (small case, 2 mm labels) at 3 mm with the image's mirrored directions.
     CaseParameters small;
     small.size = CaseSize::Small;
