@@ -6,7 +6,6 @@
 #include "Commands.h"
 #include "LandmarkEvaluation.h"
 #include "RigidRegistrationLogic.h"
-#include "FiniteElementSolver.h"
 #include "LabelOverlap.h"
 #include "RunReport.h"
 #include "TissueClassificationLogic.h"
@@ -17,12 +16,10 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <cstring>
 #include <cstdio>
 #include <memory>
 #include <random>
 #include <sstream>
-#include <unordered_map>
 
 namespace brainshift::cli {
 namespace fs = std::filesystem;
@@ -270,166 +267,6 @@ void runClassifyBench(const ClassifyBenchOptions& o)
   writeTextFileAtomically(o.outputDir / "classification_sweep.csv", csv.str());
 }
 
-struct SimulateBenchOptions {
-  fs::path outputDir;
-  std::vector<double> equations{20000, 77511, 253308, 1000000};
-  std::vector<int> ranks{1, 2};
-  std::vector<std::string> solvers{"cg+gamg", "cg+hypre", "gmres+bjacobi", "cholesky+mumps"};
-  double directLimit = 300000;   ///< no direct factorisation above this many equations (memory)
-  double gmresLimit = 300000;    ///< the paper's solver is slow: not above this
-};
-
-/// A brain-sized ellipsoid (semi-axes 70, 85, 60 mm) cut from a Kuhn lattice of spacing h, its
-/// surface nodes imposed with a sag under a craniotomy (10 mm peak, Gaussian, 25 mm) and zero
-/// elsewhere: the shape of the problem BrainShift solves, at a chosen size.
-FiniteElementJob ellipsoidPhantom(double h)
-{
-  const double a = 70, b = 85, c = 60;
-  const int nx = int(std::ceil(2 * a / h)), ny = int(std::ceil(2 * b / h)), nz = int(std::ceil(2 * c / h));
-  auto inside = [&](double x, double y, double z) { return (x * x) / (a * a) + (y * y) / (b * b) + (z * z) / (c * c) <= 1.0; };
-  auto position = [&](int i, int j, int k) { return std::array<double, 3>{-a + i * h, -b + j * h, -c + k * h}; };
-  auto latticeId = [&](int i, int j, int k) { return std::int64_t(i) + std::int64_t(nx + 1) * (std::int64_t(j) + std::int64_t(ny + 1) * k); };
-  std::unordered_map<std::int64_t, std::int32_t> nodeOf;
-  FiniteElementJob job;
-  auto node = [&](int i, int j, int k) {
-    const std::int64_t key = latticeId(i, j, k);
-    auto [at, inserted] = nodeOf.emplace(key, std::int32_t(job.nodeCount()));
-    if (inserted) {
-      const auto p = position(i, j, k);
-      job.nodes.insert(job.nodes.end(), p.begin(), p.end());
-    }
-    return at->second;
-  };
-  const int paths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < nz; ++k) {
-    for (int j = 0; j < ny; ++j) {
-      for (int i = 0; i < nx; ++i) {
-        for (const auto& path : paths) {
-          int corner[4][3];
-          int cc[3] = {i, j, k};
-          std::copy(cc, cc + 3, corner[0]);
-          for (int s = 0; s < 3; ++s) {
-            cc[path[s]] += 1;
-            std::copy(cc, cc + 3, corner[s + 1]);
-          }
-          double centroid[3] = {0, 0, 0};
-          for (const auto& q : corner) {
-            const auto p = position(q[0], q[1], q[2]);
-            for (int d = 0; d < 3; ++d) centroid[d] += p[d] / 4;
-          }
-          if (!inside(centroid[0], centroid[1], centroid[2])) continue;
-          std::int32_t tet[4];
-          for (int v = 0; v < 4; ++v) tet[v] = node(corner[v][0], corner[v][1], corner[v][2]);
-          const double* p0 = &job.nodes[3 * std::size_t(tet[0])];
-          double e[3][3];
-          for (int v = 1; v < 4; ++v) {
-            for (int d = 0; d < 3; ++d) e[v - 1][d] = job.nodes[3 * std::size_t(tet[v]) + std::size_t(d)] - p0[d];
-          }
-          const double det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) - e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
-                             e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
-          if (det < 0) std::swap(tet[2], tet[3]);
-          job.tetrahedra.insert(job.tetrahedra.end(), tet, tet + 4);
-          job.materialOfTetrahedron.push_back(0);
-        }
-      }
-    }
-  }
-  job.materials = {{3000 * 1e-6, 0.45}};
-  // Surface nodes: on a face that belongs to one tetrahedron only.
-  std::unordered_map<std::string, int> faceCount;
-  auto faceKey = [](std::int32_t x, std::int32_t y, std::int32_t z) {
-    std::int32_t f[3] = {x, y, z};
-    std::sort(f, f + 3);
-    return std::string(reinterpret_cast<const char*>(f), sizeof(f));
-  };
-  const int faces[4][3] = {{0, 1, 2}, {0, 1, 3}, {0, 2, 3}, {1, 2, 3}};
-  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
-    for (const auto& f : faces) faceCount[faceKey(job.tetrahedra[4 * t + f[0]], job.tetrahedra[4 * t + f[1]], job.tetrahedra[4 * t + f[2]])] += 1;
-  }
-  std::vector<char> onSurface(job.nodeCount(), 0);
-  for (const auto& [key, count] : faceCount) {
-    if (count != 1) continue;
-    std::int32_t f[3];
-    std::memcpy(f, key.data(), sizeof(f));
-    for (std::int32_t v : f) onSurface[std::size_t(v)] = 1;
-  }
-  const double craniotomy[3] = {-40, -40, 35}; // right frontal, superior
-  for (std::size_t v = 0; v < job.nodeCount(); ++v) {
-    if (!onSurface[v]) continue;
-    const double* p = &job.nodes[3 * v];
-    const double r2 = (p[0] - craniotomy[0]) * (p[0] - craniotomy[0]) + (p[1] - craniotomy[1]) * (p[1] - craniotomy[1]) +
-                      (p[2] - craniotomy[2]) * (p[2] - craniotomy[2]);
-    const double sag = 10.0 * std::exp(-r2 / (2 * 25.0 * 25.0));
-    job.fixedNodes.push_back(std::int32_t(v));
-    // Sinking along the inward direction of the craniotomy.
-    const double norm = std::sqrt(craniotomy[0] * craniotomy[0] + craniotomy[1] * craniotomy[1] + craniotomy[2] * craniotomy[2]);
-    for (int d = 0; d < 3; ++d) job.fixedDisplacements.push_back(-sag * craniotomy[d] / norm);
-  }
-  return job;
-}
-
-std::string solverOptionsFor(const std::string& solver)
-{
-  if (solver == "cg+gamg") return "";
-  if (solver == "cg+hypre") return "-ksp_type cg -pc_type hypre -pc_hypre_type boomeramg";
-  if (solver == "gmres+bjacobi") return "-ksp_type gmres -pc_type bjacobi -ksp_max_it 20000";
-  if (solver == "cholesky+mumps") return "-ksp_type preonly -pc_type cholesky -pc_factor_mat_solver_type mumps";
-  throw InputError("--solvers: unknown solver '" + solver + "' (cg+gamg, cg+hypre, gmres+bjacobi, cholesky+mumps)");
-}
-
-void runSimulateBench(const SimulateBenchOptions& o)
-{
-  for (const auto& s : o.solvers) solverOptionsFor(s);
-  std::ostringstream csv;
-  csv << "target_equations,equations,tetrahedra,imposed_nodes,solver,ranks,assembly_seconds,setup_seconds,solve_seconds,"
-         "prepare_wall_seconds,iterations,relative_residual,converged\n";
-  const double volume = 4.0 / 3.0 * M_PI * 70 * 85 * 60;
-  for (double target : o.equations) {
-    const double h = std::cbrt(3.0 * volume / target);
-    const FiniteElementJob mesh = ellipsoidPhantom(h);
-    std::printf("bench simulate: %.0f equations wanted, h = %.2f mm: %zu nodes (%zu equations), %zu tetrahedra, %zu imposed\n",
-                target, h, mesh.nodeCount(), 3 * mesh.nodeCount(), mesh.tetrahedronCount(), mesh.fixedNodes.size());
-    std::fflush(stdout);
-    // A second set of surface values: the next scan (the sag grown by 20 %).
-    std::vector<double> nextScan = mesh.fixedDisplacements;
-    for (double& d : nextScan) d *= 1.2;
-    for (const std::string& solver : o.solvers) {
-      const double equations = 3.0 * double(mesh.nodeCount());
-      if (solver == "cholesky+mumps" && equations > o.directLimit) continue;
-      if (solver == "gmres+bjacobi" && equations > o.gmresLimit) continue;
-      for (int ranks : o.ranks) {
-        FiniteElementJob job = mesh;
-        job.solverOptions = solverOptionsFor(solver);
-        FiniteElementRunOptions run;
-        run.worker = workerBesideExecutable();
-        run.ranks = ranks;
-        run.timeoutSeconds = 1800;
-        FiniteElementResult result;
-        double prepare = 0;
-        bool converged = true;
-        try {
-          FiniteElementSession session(job, run);
-          prepare = session.prepareSeconds();
-          session.solve(job.fixedDisplacements);
-          result = session.solve(nextScan); // the during-surgery solve, warm
-        } catch (const MethodError& e) {
-          converged = false;
-          std::printf("  %s, %d rank(s): %s\n", solver.c_str(), ranks, e.what());
-        }
-        csv << std::llround(target) << ',' << 3 * mesh.nodeCount() << ',' << mesh.tetrahedronCount() << ',' << mesh.fixedNodes.size() << ','
-            << solver << ',' << ranks << ',' << result.assemblySeconds << ',' << result.setupSeconds << ',' << result.solveSeconds
-            << ',' << prepare << ',' << result.iterations << ',' << result.relativeResidual << ',' << converged << '\n';
-        if (converged) {
-          std::printf("  %-15s %d rank(s): assembly %.2f s, setup %.2f s, solve %.3f s (%d iterations)\n", solver.c_str(), ranks,
-                      result.assemblySeconds, result.setupSeconds, result.solveSeconds, result.iterations);
-        }
-        std::fflush(stdout);
-        writeTextFileAtomically(o.outputDir / "simulate_bench.csv", csv.str());
-      }
-    }
-  }
-}
-
 } // namespace
 
 
@@ -464,22 +301,7 @@ void addBenchCommand(CLI::App& app)
   addSurfaceBenchCommand(*bench);
   addUpdateBenchCommand(*bench);
 
-  auto simulate = std::make_shared<SimulateBenchOptions>();
-  CLI::App* simulateCommand = bench->add_subcommand(
-    "simulate", "Finite element solve: time against size for the candidate solvers, 1 and 2 ranks, prepared and solved");
-  simulateCommand->add_option("--output-dir", simulate->outputDir, "where the measurements go")->required();
-  simulateCommand->add_option("--equations", simulate->equations, "problem sizes")->delimiter(',')->capture_default_str();
-  simulateCommand->add_option("--ranks", simulate->ranks, "rank counts")->delimiter(',')->capture_default_str();
-  simulateCommand->add_option("--solvers", simulate->solvers, "solvers")->delimiter(',')->capture_default_str();
-  simulateCommand->callback([simulate] {
-    for (double e : simulate->equations) {
-      if (!(e >= 1000 && e <= 5e6)) throw InputError("--equations: each must be within 1000 to 5000000");
-    }
-    for (int r : simulate->ranks) {
-      if (r < 1 || r > 64) throw InputError("--ranks: each must be within 1 to 64");
-    }
-    runSimulateBench(*simulate);
-  });
+  addSimulateBenchCommand(*bench);
 
   classifyCommand->callback([classify] {
     for (double v : classify->noise) {

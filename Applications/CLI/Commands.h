@@ -20,6 +20,10 @@ struct RunOptions {
   std::optional<std::string> meshBackend;
   std::optional<std::string> solverOptions;
   std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
+  /// An earlier scan's output folder of the same case (register --previous): its rigid transform
+  /// starts the registration, its prototypes classify, its mesh and preoperative surface fit are reused.
+  std::filesystem::path previous;
+  bool overwrite = false; ///< register into a folder holding another case's results
 };
 
 void addEvaluateCommand(CLI::App& app);
@@ -30,5 +34,6 @@ void addBenchCommand(CLI::App& app);
 void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.cxx
 void addSurfaceBenchCommand(CLI::App& bench); ///< `bench surface`, SurfaceBenchCommand.cxx
 void addUpdateBenchCommand(CLI::App& bench);  ///< `bench update`, UpdateBenchCommand.cxx
+void addSimulateBenchCommand(CLI::App& bench); ///< `bench simulate`, SimulateBenchCommand.cxx
 
 } // namespace brainshift::cli

@@ -155,10 +155,9 @@ void addDemoCommand(CLI::App& app)
     run.intraopImage = files.intraopImage;
     run.overlays = {"fmri=" + files.preopFmri.string()};
     RunContext context(run, configuration, report);
-    context.loadAllInputs();
     bool pipelineComplete = false;
     try {
-      runPipeline(context);
+      runRegistration(context);
       pipelineComplete = true;
     } catch (const NotAvailableError& e) {
       report.addWarning(std::string(e.what()) + "; the demo evaluates what exists");

@@ -3,6 +3,9 @@
 #include "BrainShiftErrors.h"
 #include "VolumeIO.h"
 
+#include <algorithm>
+#include <cstdint>
+#include <cstdio>
 #include <iostream>
 
 namespace brainshift::cli {
@@ -92,6 +95,96 @@ void RunContext::loadAllInputs()
 }
 
 namespace {
+/// 64-bit FNV-1a of bytes, continued from `hash`.
+std::uint64_t fnv1a(const void* data, std::size_t size, std::uint64_t hash)
+{
+  const auto* bytes = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < size; ++i) {
+    hash ^= bytes[i];
+    hash *= 1099511628211ull;
+  }
+  return hash;
+}
+
+/// Of an image's voxels and geometry: the same data in another file or format is the same.
+template <typename Image>
+std::string fingerprintOf(const Image& image)
+{
+  std::uint64_t hash = 14695981039346656037ull;
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  for (unsigned d = 0; d < 3; ++d) {
+    const double geometry[3] = {double(size[d]), image.GetSpacing()[d], image.GetOrigin()[d]};
+    hash = fnv1a(geometry, sizeof geometry, hash);
+    for (unsigned e = 0; e < 3; ++e) {
+      const double direction = image.GetDirection()[d][e];
+      hash = fnv1a(&direction, sizeof direction, hash);
+    }
+  }
+  hash = fnv1a(image.GetBufferPointer(), image.GetLargestPossibleRegion().GetNumberOfPixels() * sizeof(*image.GetBufferPointer()), hash);
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(hash));
+  return text;
+}
+
+nlohmann::json readReportOf(const fs::path& folder)
+{
+  const fs::path file = folder / "report.json";
+  std::ifstream in(file);
+  if (!in) return nlohmann::json();
+  try {
+    return nlohmann::json::parse(in);
+  } catch (const std::exception& e) {
+    throw InputError(file.string() + ": not a BrainShift report (" + e.what() + ")");
+  }
+}
+
+/// Whether two fingerprints are of the same preoperative data.
+bool sameCase(const nlohmann::json& a, const nlohmann::json& b)
+{
+  for (const char* key : {"preop_image", "preop_labels"}) {
+    if (!a.contains(key) || !b.contains(key) || a[key].value("fingerprint", "") != b[key].value("fingerprint", "")) return false;
+  }
+  return true;
+}
+} // namespace
+
+nlohmann::json caseFingerprint(RunContext& context)
+{
+  const RunOptions& options = context.options();
+  auto entry = [](const fs::path& path, const std::string& fingerprint) {
+    return nlohmann::json{{"path", fs::absolute(path).lexically_normal().string()}, {"fingerprint", fingerprint}};
+  };
+  return {{"preop_image", entry(options.preopImage, fingerprintOf(context.preopImage("register")))},
+          {"preop_labels", entry(options.preopLabels, fingerprintOf(context.preopLabels("register")))},
+          {"intraop_image", entry(options.intraopImage, fingerprintOf(context.intraopImage("register")))}};
+}
+
+void RunContext::usePreviousScan(const nlohmann::json& fingerprint)
+{
+  const fs::path& folder = options_.previous;
+  if (folder.empty()) return;
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) throw InputError(folder.string() + ": --previous is not a folder");
+  previousReport_ = readReportOf(folder);
+  if (!previousReport_.is_object() || !previousReport_.contains("case_inputs")) {
+    throw InputError(folder.string() + ": --previous holds no report.json of an earlier `brainshift register`");
+  }
+  if (!sameCase(previousReport_["case_inputs"], fingerprint)) {
+    throw InputError(folder.string() + ": --previous is another case's output (its preoperative image or labels differ from "
+                     "--preop-image and --preop-labels)");
+  }
+}
+
+std::optional<fs::path> RunContext::previousFile(const std::string& fileName) const
+{
+  if (options_.previous.empty()) return std::nullopt;
+  const fs::path file = options_.previous / fileName;
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return std::nullopt;
+  return file;
+}
+
+namespace {
 ScalarImage::Pointer readRequired(const fs::path& path, const char* flag, const std::string& stage, RunReport& report)
 {
   if (path.empty()) throw InputError("stage '" + stage + "' needs " + flag);
@@ -146,6 +239,33 @@ const std::vector<PipelineStage>& pipelineStages()
              "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", runWarpStage},
   };
   return stages;
+}
+
+void runRegistration(RunContext& context)
+{
+  context.loadAllInputs();
+  const nlohmann::json fingerprint = caseFingerprint(context);
+  const nlohmann::json& existing = context.report().document();
+  if (existing.contains("case_inputs") && !sameCase(existing["case_inputs"], fingerprint)) {
+    if (!context.options().overwrite) {
+      throw InputError(context.options().outputDir.string() +
+                       ": holds the results of another case (its preoperative image or labels differ); choose another "
+                       "--output-dir, or pass --overwrite to replace them");
+    }
+    context.report().clear();
+  }
+  context.usePreviousScan(fingerprint);
+  context.report().set("case_inputs", fingerprint);
+  if (!context.options().previous.empty()) {
+    context.report().set("previous_scan", fs::absolute(context.options().previous).lexically_normal().string());
+  }
+  try {
+    runPipeline(context);
+  } catch (const MethodError& e) {
+    context.report().addWarning(e.what());
+    context.report().save();
+    throw;
+  }
 }
 
 void runPipeline(RunContext& context)

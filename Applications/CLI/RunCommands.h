@@ -41,6 +41,13 @@ public:
   const LabelImage& preopLabels(const std::string& stage);
   /// The --overlay volumes, read and checked once.
   const std::vector<LoadedOverlay>& overlays();
+  /// A file of the previous scan's output folder (--previous), when one was given and holds it.
+  std::optional<std::filesystem::path> previousFile(const std::string& fileName) const;
+  /// The previous scan's report (empty when none was given).
+  const nlohmann::json& previousReport() const { return previousReport_; }
+  /// Takes --previous for this case (`fingerprint`: caseFingerprint's): InputError naming the
+  /// folder when it is missing, holds no report, or is another case's.
+  void usePreviousScan(const nlohmann::json& fingerprint);
 
 private:
   RunOptions options_;
@@ -50,7 +57,20 @@ private:
   ScalarImage::Pointer preopImage_, intraopImage_;
   LabelImage::Pointer preopLabels_;
   std::optional<std::vector<LoadedOverlay>> overlays_;
+  nlohmann::json previousReport_;
 };
+
+/// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
+/// and labels and of the intraoperative image, and fingerprints of what they hold (64-bit FNV-1a of
+/// the voxels and the geometry; the same data in another file or format is the same). A later scan
+/// of the same case has the same preoperative data.
+nlohmann::json caseFingerprint(RunContext& context);
+
+/// `register`: reads and checks the inputs, refuses an output folder whose report records another
+/// case's inputs (InputError, before anything is written) unless --overwrite (then the report
+/// starts afresh), takes the previous scan (--previous), records the case's fingerprint, and runs
+/// every stage. The report is saved after each stage and on failure.
+void runRegistration(RunContext& context);
 
 /// A stage of the intraoperative update, as the command line runs it.
 struct PipelineStage {

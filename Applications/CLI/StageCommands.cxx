@@ -53,18 +53,15 @@ void addRegisterCommand(CLI::App& app)
   CLI::App* command = app.add_subcommand("register", "The whole intraoperative update: every stage, in order");
   addRunOptions(command, *options, PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays,
                 true, true, true);
+  command->add_option("--previous", options->previous,
+                      "the output folder of an earlier scan of the same case: its rigid transform starts the registration, "
+                      "its classification prototypes, mesh and preoperative surface fit are reused");
+  command->add_flag("--overwrite", options->overwrite, "replace another case's results in --output-dir");
   command->callback([options] {
     const Configuration configuration = configurationFor(*options);
     RunReport report(options->outputDir / "report.json");
     RunContext context(*options, configuration, report);
-    context.loadAllInputs();
-    try {
-      runPipeline(context);
-    } catch (const MethodError& e) {
-      report.addWarning(e.what());
-      report.save();
-      throw;
-    }
+    runRegistration(context);
   });
 }
 

@@ -24,6 +24,9 @@
 
 #include <cstdio>
 #include <numeric>
+#include <optional>
+
+#include <vtkPointData.h>
 
 namespace brainshift::cli {
 namespace fs = std::filesystem;
@@ -32,6 +35,13 @@ void runRigidStage(RunContext& context)
 {
   Stopwatch clock;
   RigidRegistrationParameters parameters;
+  // A later scan starts from the previous scan's alignment instead of the multi-start search.
+  const std::optional<fs::path> previousRigid = context.previousFile("rigid_intraop_to_preop.tfm");
+  if (previousRigid) {
+    const SpatialTransform::Pointer start = readTransform(*previousRigid);
+    if (!isLinearTransform(start)) throw InputError(previousRigid->string() + ": not a rigid transform");
+    parameters.initialIntraopToPreop = start;
+  }
   const RigidRegistrationResult result = registerRigidly(context.intraopImage("rigid"), context.preopImage("rigid"),
                                                          context.preopLabelsIfGiven(), parameters);
   const double seconds = clock.seconds();
@@ -46,6 +56,7 @@ void runRigidStage(RunContext& context)
                           {"starts_scored", result.startsScored},
                           {"winning_start_degrees", result.winningStartDegrees},
                           {"trustworthy", result.trustworthy}};
+  if (previousRigid) entry["initialised_from"] = previousRigid->string();
   if (!result.trustworthy) entry["failure"] = result.failureReason;
   context.report().setStage("rigid", entry);
   context.report().addWarnings(result.warnings);
@@ -74,7 +85,14 @@ void runClassifyStage(RunContext& context)
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   std::optional<std::vector<TissuePrototype>> prototypes;
-  if (!context.options().prototypes.empty()) prototypes = readPrototypes(context.options().prototypes);
+  // Recorded once, reused for later scans: the given ones, else the previous scan's.
+  std::optional<fs::path> prototypesFile;
+  if (!context.options().prototypes.empty()) {
+    prototypesFile = context.options().prototypes;
+  } else {
+    prototypesFile = context.previousFile("classification_prototypes.json");
+  }
+  if (prototypesFile) prototypes = readPrototypes(*prototypesFile);
   const Configuration& configuration = context.configuration();
   TissueClassificationParameters parameters;
   parameters.k = configuration.classificationK;
@@ -98,6 +116,7 @@ void runClassifyStage(RunContext& context)
                                          {"prototypes", total},
                                          {"prototypes_per_class", perClass},
                                          {"prototypes_given", prototypes.has_value()},
+                                         {"prototypes_from", prototypesFile ? prototypesFile->string() : std::string()},
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
                                          {"feature_seconds", result.featureSeconds},
@@ -162,6 +181,27 @@ void runMeshStage(RunContext& context)
   parameters.resolutionMm = configuration.meshResolutionMm;
   parameters.labels = configuration.meshLabels;
   parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
+  // A later scan of the same case (same preoperative labels, checked by register) reuses the
+  // previous scan's mesh when it was made with the same settings.
+  const std::optional<fs::path> previousMesh = context.previousFile("mesh.vtu");
+  const nlohmann::json& previousReport = context.previousReport();
+  if (previousMesh && previousReport.contains("stages") && previousReport["stages"].contains("mesh")) {
+    const nlohmann::json& before = previousReport["stages"]["mesh"];
+    if (before.value("resolution_mm", -1.0) == parameters.resolutionMm && before.value("backend", "") == configuration.meshBackend &&
+        before.value("labels", std::vector<int>{}) == parameters.labels) {
+      vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(*previousMesh));
+      if (!mesh) throw InputError(previousMesh->string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+      mesh->GetPointData()->RemoveArray("Displacement"); // the previous scan's solution
+      mesh->GetPointData()->RemoveArray("DisplacementMagnitude");
+      writeModel(mesh, context.output("mesh.vtu"));
+      nlohmann::json entry = before;
+      entry["wall_seconds"] = clock.seconds();
+      entry["reused_from"] = previousMesh->string();
+      context.report().setStage("mesh", entry);
+      std::printf("  mesh: %lld nodes, reused from the previous scan, %.2f s\n", before.value("nodes", 0LL), clock.seconds());
+      return;
+    }
+  }
   const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
   writeModel(result.mesh, context.output("mesh.vtu"));
   const MeshQuality& q = result.quality;
@@ -173,6 +213,7 @@ void runMeshStage(RunContext& context)
   context.report().setStage("mesh", {{"wall_seconds", clock.seconds()},
                                      {"backend", configuration.meshBackend},
                                      {"resolution_mm", parameters.resolutionMm},
+                                     {"labels", parameters.labels},
                                      {"nodes", q.nodes},
                                      {"tetrahedra", q.tetrahedra},
                                      {"equations", 3 * q.nodes},
@@ -220,8 +261,17 @@ void runSurfaceStage(RunContext& context)
   names.labels = labelsFile.string();
   names.rigid = rigidFile.string();
   names.preopLabels = context.options().preopLabels.string();
+  // A later scan on the same mesh reuses the preoperative boundary the previous scan found.
+  vtkSmartPointer<vtkPolyData> previousSurface;
+  const std::optional<fs::path> previousSurfaceFile = context.previousFile("brain_surface.vtp");
+  if (previousSurfaceFile && context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")) {
+    previousSurface = vtkPolyData::SafeDownCast(readModel(*previousSurfaceFile));
+    if (!previousSurface) throw InputError(previousSurfaceFile->string() + ": not a surface (vtkPolyData)");
+    if (!previousSurface->GetPointData()->GetArray("PreopBoundary")) previousSurface = nullptr; // an older run's: fit again
+    names.previousSurface = previousSurfaceFile->string();
+  }
   const ActiveSurfaceResult result = deformBrainSurface(mesh, &context.preopLabels("surface"), *labels,
-                                                        &context.intraopImage("surface"), *rigid, parameters, names);
+                                                        &context.intraopImage("surface"), *rigid, parameters, names, previousSurface);
   writeModel(result.surface, context.output("brain_surface.vtp"));
   context.report().setStage("surface", {{"wall_seconds", clock.seconds()},
                                         {"surface_nodes", result.surfaceNodes},
@@ -243,6 +293,7 @@ void runSurfaceStage(RunContext& context)
                                         {"tumour_resected", result.tumourResected},
                                         {"flipped_triangles", result.flippedTriangles},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
+                                        {"preop_boundary_from", previousSurface ? previousSurfaceFile->string() : std::string()},
                                         {"target_seconds", result.targetSeconds},
                                         {"iteration_seconds", result.iterationSeconds}});
   context.report().addWarnings(result.warnings);

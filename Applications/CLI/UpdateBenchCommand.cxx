@@ -26,10 +26,11 @@ struct UpdateBenchOptions {
   fs::path outputDir;
   std::string size = "full";
   std::vector<double> meshResolutions{3, 4, 5, 6};
-  std::vector<double> solverTolerances{1e-10, 1e-5};
+  std::vector<double> solverTolerances{1e-8, 1e-5}; ///< the last: the stage's default (the variants run it)
   std::vector<unsigned> surfaceIterations{200, 10};
   std::vector<double> shifts{5, 15};
   bool variants = true;
+  bool serialScans = true; ///< a later scan of the default case after an earlier one (register --previous)
 };
 
 struct Setting {
@@ -46,6 +47,9 @@ void runUpdateBench(const UpdateBenchOptions& o)
   fs::create_directories(o.outputDir, ec);
   const fs::path work = o.outputDir / "runs";
   fs::remove_all(work, ec);
+  if (o.meshResolutions.empty() || o.solverTolerances.empty() || o.surfaceIterations.empty()) {
+    throw InputError("--mesh-resolutions, --solver-tolerances and --surface-iterations need at least one value each");
+  }
 
   // The cases: the default and its variants (shift size, craniotomy site, no resection).
   struct NamedCase {
@@ -75,6 +79,60 @@ void runUpdateBench(const UpdateBenchOptions& o)
   csv << "case,method,mesh_resolution_mm,solver_rtol,surface_iterations,equations,total_seconds,rigid_seconds,classify_seconds,"
          "mesh_seconds,surface_seconds,simulate_seconds,simulate_solve_seconds,warp_seconds,tre_mean_mm,tre_p95_mm,tre_max_mm,"
          "tre_craniotomy_mm,tre_near_cavity_mm,tre_brain_mm,folded_voxels\n";
+  // One `register` as a user runs it (every stage, files and all), timed; `previous`: an earlier
+  // scan's output folder of the same case (empty: a first scan).
+  struct Registration {
+    fs::path outputDir;
+    json report;
+    double seconds = 0;
+  };
+  auto registerCase = [&](const CaseFiles& files, const fs::path& outputDir, const Setting& s, const fs::path& previous) {
+    RunOptions run;
+    run.preopImage = files.preopImage;
+    run.preopLabels = files.preopLabels;
+    run.intraopImage = files.intraopImage;
+    run.overlays = {"fmri=" + files.preopFmri.string()};
+    run.outputDir = outputDir;
+    run.previous = previous;
+    run.meshResolutionMm = s.meshResolutionMm;
+    std::ostringstream solver;
+    solver << "-ksp_rtol " << s.solverTolerance;
+    run.solverOptions = solver.str();
+    Configuration configuration = configurationFor(run);
+    configuration.surfaceMaximumIterations = s.surfaceIterations;
+    fs::create_directories(run.outputDir, ec);
+    RunReport report(run.outputDir / "report.json");
+    RunContext context(run, configuration, report);
+    Stopwatch clock;
+    runRegistration(context);
+    return Registration{run.outputDir, report.document(), clock.seconds()};
+  };
+  auto row = [&](const std::string& caseName, const std::string& method, const Setting& s, const Registration& r,
+                 const RegistrationError& tre, bool rigidOnly) {
+    const json& stages = r.report["stages"];
+    auto seconds = [&](const char* stage) { return stages[stage]["wall_seconds"].get<double>(); };
+    auto group = [&](const char* name) { return tre.groups.count(name) ? tre.groups.at(name).meanMm : -1.0; };
+    if (rigidOnly) {
+      csv << caseName << ',' << method << ",,,,0," << seconds("rigid") << ',' << seconds("rigid") << ",,,,,,,";
+    } else {
+      csv << caseName << ',' << method << ',' << s.meshResolutionMm << ',' << s.solverTolerance << ',' << s.surfaceIterations << ','
+          << stages["simulate"]["equations"].get<long long>() << ',' << r.seconds << ',' << seconds("rigid") << ','
+          << seconds("classify") << ',' << seconds("mesh") << ',' << seconds("surface") << ',' << seconds("simulate") << ','
+          << stages["simulate"]["solve_seconds"].get<double>() << ',' << seconds("warp") << ',';
+    }
+    csv << tre.overall.meanMm << ',' << tre.overall.p95Mm << ',' << tre.overall.maxMm << ',' << group("craniotomy") << ','
+        << group("near-cavity") << ',' << group("brain") << ',';
+    if (!rigidOnly) csv << stages["warp"]["folded_voxels"].get<long long>();
+    csv << '\n';
+    std::printf("  %s, %s, mesh %.1f mm, rtol %.0e, surface %u iterations: TRE %.2f mm mean, %.2f p95, %.1f s\n", caseName.c_str(),
+                method.c_str(), s.meshResolutionMm, s.solverTolerance, s.surfaceIterations, tre.overall.meanMm, tre.overall.p95Mm,
+                rigidOnly ? seconds("rigid") : r.seconds);
+    std::fflush(stdout);
+    writeTextFileAtomically(o.outputDir / "update_bench.csv", csv.str()); // as it goes: a long run can be read early
+  };
+  const Configuration productDefaults;
+  const Setting defaultSetting{"default", productDefaults.meshResolutionMm, o.solverTolerances.back(), productDefaults.surfaceMaximumIterations};
+
   for (const NamedCase& named : cases) {
     const SimulatedCase simulated = simulateCase(named.parameters);
     const CaseFiles files(work / named.name / "case");
@@ -86,56 +144,45 @@ void runUpdateBench(const UpdateBenchOptions& o)
           for (unsigned iterations : o.surfaceIterations) settings.push_back({named.name, h, tolerance, iterations});
         }
       }
-    } else {
-      settings.push_back({named.name, o.meshResolutions.front(), o.solverTolerances.front(), o.surfaceIterations.front()});
+    } else { // the variants at the product's defaults
+      Setting variant = defaultSetting;
+      variant.caseName = named.name;
+      settings.push_back(variant);
     }
     bool rigidRecorded = false;
     for (const Setting& s : settings) {
       std::ostringstream tag;
       tag << "mesh" << s.meshResolutionMm << "-rtol" << s.solverTolerance << "-surf" << s.surfaceIterations;
-      RunOptions run;
-      run.preopImage = files.preopImage;
-      run.preopLabels = files.preopLabels;
-      run.intraopImage = files.intraopImage;
-      run.overlays = {"fmri=" + files.preopFmri.string()};
-      run.outputDir = work / named.name / tag.str();
-      run.meshResolutionMm = s.meshResolutionMm;
-      std::ostringstream solver;
-      solver << "-ksp_rtol " << s.solverTolerance;
-      run.solverOptions = solver.str();
-      Configuration configuration = configurationFor(run);
-      configuration.surfaceMaximumIterations = s.surfaceIterations;
-      fs::create_directories(run.outputDir, ec);
-      RunReport report(run.outputDir / "report.json");
-      RunContext context(run, configuration, report);
-      Stopwatch clock;
-      context.loadAllInputs();
-      runPipeline(context);
-      const double total = clock.seconds();
-      const RegistrationError tre = evaluateTransform(*readTransform(run.outputDir / "intraop_to_preop.h5"), simulated.landmarks);
-      auto seconds = [&](const char* stage) { return report.stage(stage)["wall_seconds"].get<double>(); };
-      auto group = [&](const char* name) { return tre.groups.count(name) ? tre.groups.at(name).meanMm : -1.0; };
+      const Registration r = registerCase(files, work / named.name / tag.str(), s, {});
       if (!rigidRecorded) { // the rigid registration alone, as the reference point
-        const RegistrationError rigid = evaluateTransform(*readTransform(run.outputDir / "rigid_intraop_to_preop.tfm"), simulated.landmarks);
-        auto rigidGroup = [&](const char* name) { return rigid.groups.count(name) ? rigid.groups.at(name).meanMm : -1.0; };
-        csv << named.name << ",rigid,,,,0," << seconds("rigid") << ',' << seconds("rigid") << ",,,,,,," << rigid.overall.meanMm << ','
-            << rigid.overall.p95Mm << ',' << rigid.overall.maxMm << ',' << rigidGroup("craniotomy") << ','
-            << rigidGroup("near-cavity") << ',' << rigidGroup("brain") << ",\n";
+        const RegistrationError rigid = evaluateTransform(*readTransform(r.outputDir / "rigid_intraop_to_preop.tfm"), simulated.landmarks);
+        row(named.name, "rigid", s, r, rigid, true);
         rigidRecorded = true;
       }
-      csv << named.name << ",brainshift," << s.meshResolutionMm << ',' << s.solverTolerance << ',' << s.surfaceIterations << ','
-          << report.stage("simulate")["equations"].get<long long>() << ',' << total << ',' << seconds("rigid") << ','
-          << seconds("classify") << ',' << seconds("mesh") << ',' << seconds("surface") << ',' << seconds("simulate") << ','
-          << report.stage("simulate")["solve_seconds"].get<double>() << ',' << seconds("warp") << ',' << tre.overall.meanMm << ','
-          << tre.overall.p95Mm << ',' << tre.overall.maxMm << ',' << group("craniotomy") << ',' << group("near-cavity") << ','
-          << group("brain") << ',' << report.stage("warp")["folded_voxels"].get<long long>() << '\n';
-      std::printf("  %s, mesh %.1f mm, rtol %.0e, surface %u iterations: TRE %.2f mm mean, %.2f p95, %.1f s\n", named.name.c_str(),
-                  s.meshResolutionMm, s.solverTolerance, s.surfaceIterations, tre.overall.meanMm, tre.overall.p95Mm, total);
-      std::fflush(stdout);
-      writeTextFileAtomically(o.outputDir / "update_bench.csv", csv.str()); // as it goes: a long run can be read early
+      row(named.name, "brainshift", s, r, evaluateTransform(*readTransform(r.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
+      if (o.serialScans && named.name == "default" && s.meshResolutionMm == defaultSetting.meshResolutionMm &&
+          s.solverTolerance == defaultSetting.solverTolerance && s.surfaceIterations == defaultSetting.surfaceIterations) {
+        // Serial scans: an earlier scan of the same case (the brain sunk by 5 mm, the tumour still
+        // there) registered first, then this scan as the later one, reusing what the first prepared.
+        CaseParameters early = named.parameters;
+        early.shiftMillimetres = 5;
+        early.resection = false;
+        const CaseFiles earlyFiles(work / "serial" / "case-early");
+        writeCase(simulateCase(early), early, earlyFiles.folder);
+        const Registration first = registerCase(earlyFiles, work / "serial" / "scan-1", s, {});
+        const Registration later = registerCase(files, work / "serial" / "scan-2", s, first.outputDir);
+        row(named.name, "brainshift-later-scan", s, later,
+            evaluateTransform(*readTransform(later.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
+      }
     }
   }
-  fs::remove_all(work, ec); // the runs' files are large; the table is what stays
+  // The runs' files are large; the table is what stays, with each case's inputs (for other tools'
+  // comparisons on the same images, such as elastix in run.sh).
+  for (const auto& entry : fs::directory_iterator(work, ec)) {
+    for (const auto& run : fs::directory_iterator(entry.path(), ec)) {
+      if (run.path().filename().string().rfind("case", 0) != 0) fs::remove_all(run.path(), ec);
+    }
+  }
 }
 
 } // namespace
@@ -153,6 +200,7 @@ void addUpdateBenchCommand(CLI::App& bench)
   command->add_option("--surface-iterations", o->surfaceIterations, "active surface iteration limits")->delimiter(',')->capture_default_str();
   command->add_option("--shifts", o->shifts, "shift sizes of the variants, mm")->delimiter(',')->capture_default_str();
   command->add_flag("!--no-variants", o->variants, "only the default case");
+  command->add_flag("!--no-serial-scans", o->serialScans, "no later scan of the default case after an earlier one");
   command->callback([o] {
     for (double h : o->meshResolutions) {
       if (!(h >= 1 && h <= 10)) throw InputError("--mesh-resolutions: each must be within 1 to 10 mm");

@@ -581,7 +581,8 @@ void ActiveSurfaceParameters::validate() const
 
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
                                        const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
-                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names)
+                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
+                                       vtkPolyData* previousSurface)
 {
   p.validate();
   ActiveSurfaceResult result;
@@ -658,7 +659,30 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   Eigen::MatrixXd preopBoundary = smoothedStart;
   std::vector<unsigned char> freeReason(n, 0); // 0 imposed, 1 resected tumour, 2 outside the image, 3 unmatched
   FitOutcome preopFit;
-  if (preopLabels) {
+  preopFit.converged = true;
+  if (previousSurface) {
+    // An earlier scan of the same case found it already.
+    vtkDataArray* found = previousSurface->GetPointData()->GetArray("PreopBoundary");
+    vtkDataArray* previousIds = previousSurface->GetPointData()->GetArray("MeshNodeId");
+    if (!found || found->GetNumberOfComponents() != 3 || !previousIds) {
+      throw InputError(names.previousSurface + ": no point arrays \"PreopBoundary\" (3 components) and \"MeshNodeId\"");
+    }
+    if (previousSurface->GetNumberOfPoints() != vtkIdType(n)) {
+      throw InputError(names.previousSurface + ": " + std::to_string(previousSurface->GetNumberOfPoints()) +
+                       " surface nodes, not the " + std::to_string(n) + " of " + names.mesh + ": another mesh");
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      if (std::lround(previousIds->GetComponent(vtkIdType(i), 0)) != std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))) {
+        throw InputError(names.previousSurface + ": surface node " + std::to_string(i) + " is another mesh node than in " + names.mesh);
+      }
+      for (int d = 0; d < 3; ++d) {
+        const double value = found->GetComponent(vtkIdType(i), d);
+        if (!std::isfinite(value)) throw InputError(names.previousSurface + ": a PreopBoundary value is not finite");
+        preopBoundary(Eigen::Index(i), d) = value;
+      }
+    }
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  } else if (preopLabels) {
     Warnings ignored;
     // Only the part around the surface is needed: distance maps are the stage's main cost.
     std::vector<Vec> indices(n);
@@ -829,6 +853,14 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   surface->GetPointData()->AddArray(magnitude);
   surface->GetPointData()->AddArray(nodeIds);
   surface->GetPointData()->AddArray(imposed);
+  vtkNew<vtkDoubleArray> preopBoundaryArray; // for the next scan (deformBrainSurface's previousSurface)
+  preopBoundaryArray->SetName("PreopBoundary");
+  preopBoundaryArray->SetNumberOfComponents(3);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec b = preopBoundary.row(Eigen::Index(i)).transpose();
+    preopBoundaryArray->InsertNextTuple(b.data());
+  }
+  surface->GetPointData()->AddArray(preopBoundaryArray);
   surface->GetPointData()->SetActiveScalars("DisplacementMagnitude");
   result.surface = surface;
   return result;

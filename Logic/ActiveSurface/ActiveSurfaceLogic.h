@@ -98,6 +98,7 @@ struct ActiveSurfaceInputNames {
   std::string preopLabels = "the preoperative labels";
   std::string labels = "the intraoperative segmentation";
   std::string rigid = "the rigid transform";
+  std::string previousSurface = "the previous scan's surface";
 };
 
 /// Deforms the brain boundary of `mesh` (cell array "Label") onto the brain of `intraopLabels`.
@@ -108,9 +109,14 @@ struct ActiveSurfaceInputNames {
 /// InputError for a mesh without the brain labels or with a non-manifold brain surface, an empty
 /// target segmentation, a surface that does not overlap the intraoperative image, mismatched grids.
 /// MethodError if the surface folds (triangles reversed) or most nodes find no counterpart.
+/// The result's surface carries the preoperative boundary it found as the point array
+/// "PreopBoundary" (model frame, mm). `previousSurface`, an earlier scan's result on the same mesh
+/// and preoperative labels, gives it back: the preoperative fit is skipped (the serial scan's
+/// saving); a surface of another mesh (other node ids or count) is an InputError naming
+/// `names.previousSurface`.
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
                                        const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
                                        const ActiveSurfaceParameters& parameters,
-                                       const ActiveSurfaceInputNames& names = {});
+                                       const ActiveSurfaceInputNames& names = {}, vtkPolyData* previousSurface = nullptr);
 
 } // namespace brainshift

@@ -24,6 +24,9 @@ public:
   /// Sets a top-level entry other than the stages (e.g. "case", "brainshift_version").
   void set(const std::string& key, const nlohmann::json& value);
 
+  /// Starts afresh: no stages, entries or warnings (the file is replaced on the next save).
+  void clear() { document_ = nlohmann::json::object(); }
+
   void addWarning(const std::string& warning);
   void addWarnings(const std::vector<std::string>& warnings);
   const nlohmann::json& document() const { return document_; }

@@ -7,8 +7,9 @@
 // there are several ranks; nodes weighted by the tetrahedra around them, which is the assembly
 // work), nodes are renumbered so that each rank owns a contiguous block, each tetrahedron is
 // assembled by the owner of its first node, the fixed dofs are eliminated keeping the matrix
-// symmetric (MatZeroRowsColumns), and the system is solved with CG and algebraic multigrid (GAMG
-// with the rigid body modes as near-nullspace) unless the job's options say otherwise. The
+// symmetric (MatZeroRowsColumns), and the system is solved by the tuned default (setTunedDefault:
+// chosen by measurement, by size and by whether the problem is served) unless the job's options
+// say otherwise. The
 // convergence reason is checked. Progress goes to stdout as "progress <stage> <fraction>" lines.
 // Exit status: 0 solved, 2 bad job, 3 the solver did not converge, 1 anything else.
 #include "FiniteElementJob.h"
@@ -140,11 +141,72 @@ Numbering partitionNodes(const FiniteElementJob& job, int rank, int size)
   return numbering;
 }
 
+/// The tuned default solver, chosen by measurement on brain meshes of the built-in case
+/// (`brainshift bench simulate`, Testing/Benchmarks/results/simulate: 20,037 to 933,141 equations,
+/// 1 and 2 ranks, each solution compared with the exact one). It applies unless the job's options
+/// choose the Krylov method or the preconditioner themselves (-ksp_type, -pc_type); any other
+/// option (-ksp_rtol, ...) goes over it.
+/// - Solved once (the command line's simulate stage): up to kSmallProblemLimit equations, CG with
+///   block Jacobi and incomplete Cholesky in each rank's block: no setup to speak of, the fastest
+///   whole stage at 78,480 and 245,502 equations (0.8 s and 4.1 s on one rank, against 3.1 s and
+///   12 s for CG + GAMG). PETSc's default ILU(0) in the blocks is not always positive: CG broke
+///   down on it (KSP reason -8) at 933,141 equations, and there incomplete Cholesky, shifted to
+///   stay positive, took 303 iterations to stop 0.25 mm from the solution. Above the limit, GMRES
+///   with block Jacobi/ILU(0), the seed paper's solver: the fastest whole stage at 933,141
+///   equations (30 s on one rank, 19 s on two, against 43 s and 26 s for CG + GAMG, whose setup
+///   is the cost), within 0.01 mm.
+/// - Served (prepared before surgery, solved for each scan): up to kSmallProblemLimit equations,
+///   a sparse Cholesky factorisation kept between scans, CHOLMOD on one rank and MUMPS on several;
+///   the during-surgery solve is then two triangular solves (0.07-0.1 s at 78,480 equations,
+///   0.45-0.6 s at 245,502, against 0.26 s and 1.8 s for the fastest iterative solver). Above it
+///   the factorisation's time and memory grow too fast (28 s to factor 245,502 equations): CG with
+///   GAMG (rigid body modes as near-nullspace), the fastest during-surgery solve at 933,141
+///   equations (12 s on two ranks), its iterations flat under refinement (19 to 25).
+/// - Iterative solvers stop at a relative (preconditioned) residual of kRelativeTolerance: in the
+///   tolerance sweep (78,480 equations) the displacement then lies within 4e-4 mm of the exact
+///   solution with CG + block Jacobi and 6e-4 mm with CG + GAMG, far below the model's own error,
+///   for a third less time than at 1e-6.
+constexpr std::int64_t kSmallProblemLimit = 300000;
+constexpr double kRelativeTolerance = 1e-5;
+
+void setTunedDefault(KSP ksp, PC pc, std::int64_t equations, int ranks, bool served)
+{
+  PetscBool kspTypeGiven = PETSC_FALSE, pcTypeGiven = PETSC_FALSE;
+  check(PetscOptionsHasName(nullptr, nullptr, "-ksp_type", &kspTypeGiven), "PetscOptionsHasName");
+  check(PetscOptionsHasName(nullptr, nullptr, "-pc_type", &pcTypeGiven), "PetscOptionsHasName");
+  check(KSPSetTolerances(ksp, kRelativeTolerance, PETSC_DEFAULT, PETSC_DEFAULT, 20000), "KSPSetTolerances");
+  check(KSPSetType(ksp, KSPCG), "KSPSetType");
+  if (kspTypeGiven || pcTypeGiven) { // the job chooses: CG + GAMG beneath its options
+    check(PCSetType(pc, PCGAMG), "PCSetType");
+    return;
+  }
+  const bool small = equations <= kSmallProblemLimit;
+  if (served && small) {
+    check(KSPSetType(ksp, KSPPREONLY), "KSPSetType");
+    check(PCSetType(pc, PCCHOLESKY), "PCSetType");
+    check(PCFactorSetMatSolverType(pc, ranks == 1 ? MATSOLVERCHOLMOD : MATSOLVERMUMPS), "PCFactorSetMatSolverType");
+  } else if (served) {
+    check(PCSetType(pc, PCGAMG), "PCSetType");
+  } else if (!small) {
+    check(KSPSetType(ksp, KSPGMRES), "KSPSetType");
+    check(PCSetType(pc, PCBJACOBI), "PCSetType");
+  } else {
+    check(PCSetType(pc, PCBJACOBI), "PCSetType");
+    // Incomplete Cholesky in each rank's block, shifted to stay positive definite: PETSc's default
+    // ILU(0) there is not always positive, and CG broke down on it (KSP reason -8) on the
+    // benchmark's 933,141-equation brain.
+    PetscBool subTypeGiven = PETSC_FALSE;
+    check(PetscOptionsHasName(nullptr, nullptr, "-sub_pc_type", &subTypeGiven), "PetscOptionsHasName");
+    if (!subTypeGiven) check(PetscOptionsSetValue(nullptr, "-sub_pc_type", "icc"), "PetscOptionsSetValue");
+  }
+}
+
 /// The prepared problem: partitioned, assembled, fixed dofs eliminated, solver set up. Only the
 /// imposed values change between solves (one right-hand side each), so a served worker keeps it.
 class PreparedProblem {
 public:
-  PreparedProblem(const FiniteElementJob& job, int rank, int size, bool keepAssembled)
+  /// `served`: the problem is prepared once and solved for many sets of values (--serve).
+  PreparedProblem(const FiniteElementJob& job, int rank, int size, bool served)
     : job_(job), rank_(rank), size_(size)
   {
     result_.ranks = size;
@@ -220,7 +282,6 @@ public:
     }
     // The assembled matrix before elimination gives the right-hand side of each new set of values.
     check(MatDuplicate(A_, MAT_COPY_VALUES, &assembled_), "MatDuplicate");
-    (void)keepAssembled;
 
     // -- Eliminate the fixed dofs, keeping A symmetric.
     for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
@@ -258,11 +319,9 @@ public:
     progress(rank, "setup", 0.0);
     check(KSPCreate(PETSC_COMM_WORLD, &ksp_), "KSPCreate");
     check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
-    check(KSPSetType(ksp_, KSPCG), "KSPSetType");
-    check(KSPSetTolerances(ksp_, 1e-8, PETSC_DEFAULT, PETSC_DEFAULT, 5000), "KSPSetTolerances");
     PC pc;
     check(KSPGetPC(ksp_, &pc), "KSPGetPC");
-    check(PCSetType(pc, PCGAMG), "PCSetType");
+    setTunedDefault(ksp_, pc, result_.equations, size, served);
     check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
     KSPType kspType;
     PCType pcType;
@@ -276,6 +335,23 @@ public:
     check(KSPSetUpOnBlocks(ksp_), "KSPSetUpOnBlocks");
     check(PCGetType(pc, &pcType), "PCGetType");
     result_.solver = std::string(kspType) + "+" + pcType;
+    if (std::string(pcType) == PCBJACOBI) { // and what each block holds, e.g. cg+bjacobi/icc
+      PetscInt blocks = 0;
+      KSP* subSolvers = nullptr;
+      check(PCBJacobiGetSubKSP(pc, &blocks, nullptr, &subSolvers), "PCBJacobiGetSubKSP");
+      if (blocks > 0) {
+        PC subPc;
+        PCType subType;
+        check(KSPGetPC(subSolvers[0], &subPc), "KSPGetPC");
+        check(PCGetType(subPc, &subType), "PCGetType");
+        result_.solver += std::string("/") + subType;
+      }
+    }
+    if (std::string(pcType) == PCCHOLESKY || std::string(pcType) == PCLU) {
+      MatSolverType package = nullptr;
+      check(PCFactorGetMatSolverType(pc, &package), "PCFactorGetMatSolverType");
+      result_.solver = std::string(pcType) + "+" + (package ? package : MATSOLVERPETSC); // e.g. cholesky+cholmod
+    }
     result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
     check(MatCreateVecs(A_, &x_, &b_), "MatCreateVecs");
   }

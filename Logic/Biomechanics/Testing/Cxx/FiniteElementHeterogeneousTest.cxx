@@ -39,7 +39,7 @@ int FiniteElementHeterogeneousTest(int, char*[])
       job.solverOptions = "-ksp_rtol 1e-12";
       const FiniteElementResult result = solveWithWorker(job, testing::workerOptions());
       const double error = testing::maximumNodalError(job, result, exact);
-      std::cout << "nu " << nu << ": " << result.iterations << " iterations (CG + GAMG), max error " << error << " mm\n";
+      std::cout << "nu " << nu << ": " << result.iterations << " iterations (" << result.solver << "), max error " << error << " mm\n";
       BS_CHECK_MSG(error < 1e-7, "nu " << nu << ": " << error);
     }
   });

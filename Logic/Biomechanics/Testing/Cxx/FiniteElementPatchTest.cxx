@@ -25,12 +25,15 @@ int FiniteElementPatchTest(int, char*[])
     BS_CHECK_MSG(error < 1e-10, error);
     BS_CHECK(result.equations == 3 * std::int64_t(job.nodeCount()));
     BS_CHECK(result.convergedReason > 0);
-    BS_CHECK(result.solver == "preonly+lu");
+    BS_CHECK(result.solver == "lu+petsc");
     BS_CHECK(!stages.empty() && stages.back() == "done");
-    // The same with the default iterative solver (CG + GAMG), to its tolerance.
-    job.solverOptions = "-ksp_rtol 1e-12";
-    const FiniteElementResult iterative = solveWithWorker(job, testing::workerOptions());
-    BS_CHECK(iterative.solver == "cg+gamg");
-    BS_CHECK_MSG(testing::maximumNodalError(job, iterative, linear) < 1e-8, testing::maximumNodalError(job, iterative, linear));
+    // The same with the default one-shot solver (CG + block Jacobi/ICC) and with CG + GAMG (the
+    // default above its size limit), to their tolerance.
+    for (const char* options : {"-ksp_rtol 1e-12", "-pc_type gamg -ksp_rtol 1e-12"}) {
+      job.solverOptions = options;
+      const FiniteElementResult iterative = solveWithWorker(job, testing::workerOptions());
+      BS_CHECK_MSG(iterative.solver == (job.solverOptions.find("gamg") != std::string::npos ? "cg+gamg" : "cg+bjacobi/icc"), iterative.solver);
+      BS_CHECK_MSG(testing::maximumNodalError(job, iterative, linear) < 1e-8, testing::maximumNodalError(job, iterative, linear));
+    }
   });
 }

@@ -1,5 +1,5 @@
 // Prepared before surgery, solved during it: a session prepares once (partition, assembly,
-// elimination, multigrid setup) and answers new imposed values for the same boundary nodes; each
+// elimination, factorisation or multigrid setup) and answers new imposed values for the same boundary nodes; each
 // answer equals a one-shot solve and reuses the one preparation (its speed is measured by
 // Testing/Benchmarks/simulate, not here).
 #include "BrainShiftTestingSupport.h"
@@ -51,17 +51,40 @@ int FiniteElementSessionTest(int, char*[])
                   << " mm\n";
         BS_CHECK_MSG(difference < 1e-6, difference);
         BS_CHECK(served.convergedReason > 0);
+        // The tuned default by measurement (Testing/Benchmarks/results/simulate): a served problem
+        // of this size keeps a Cholesky factorisation (CHOLMOD is sequential, MUMPS on several
+        // ranks), a one-shot solve takes CG with block Jacobi and incomplete Cholesky.
+        BS_CHECK_MSG(served.solver == (ranks == 1 ? "cholesky+cholmod" : "cholesky+mumps"), served.solver);
+        BS_CHECK_MSG(served.iterations == 1, served.iterations);
+        BS_CHECK_MSG(once.solver == "cg+bjacobi/icc", once.solver);
         answers.push_back(served);
       }
       // One preparation for every solve: the same assembly and setup, the same answer to the same values.
       for (const FiniteElementResult& a : answers) {
         BS_CHECK(a.assemblySeconds == answers[0].assemblySeconds && a.setupSeconds == answers[0].setupSeconds);
       }
-      BS_CHECK(answers[2].displacements == answers[0].displacements);
+      double again = 0; // the same values again: the same answer (to rounding: MUMPS reorders its sums between solves)
+      for (std::size_t i = 0; i < answers[0].displacements.size(); ++i) {
+        again = std::max(again, std::abs(answers[2].displacements[i] - answers[0].displacements[i]));
+      }
+      std::cout << ranks << " ranks: the same values solved again differ by " << again << " mm\n";
+      BS_CHECK_MSG(again < 1e-12, again);
       BS_CHECK(answers[2].iterations == answers[0].iterations);
       // A malformed request is refused and the session goes on.
       BS_CHECK_THROWS(session.solve({1.0, 2.0}), std::invalid_argument, "3 values per fixed node");
       BS_CHECK(session.solve(job.fixedDisplacements).convergedReason > 0);
+    }
+
+    // Options that choose the method replace the tuned default (CG + GAMG beneath them); others go over it.
+    {
+      FiniteElementJob chosen = job;
+      chosen.solverOptions = "-pc_type gamg -ksp_rtol 1e-10";
+      FiniteElementSession session(chosen, testing::workerOptions(1));
+      const FiniteElementResult r = session.solve(job.fixedDisplacements);
+      BS_CHECK_MSG(r.solver == "cg+gamg" && r.iterations > 1, r.solver << ", " << r.iterations);
+      chosen.solverOptions = "-ksp_type gmres -pc_type bjacobi -ksp_rtol 1e-10";
+      const std::string paper = solveWithWorker(chosen, testing::workerOptions(1)).solver;
+      BS_CHECK_MSG(paper == "gmres+bjacobi/ilu", paper); // the seed paper's solver
     }
 
     // A served worker that dies between scans is reported, and the caller survives (no SIGPIPE).
