@@ -172,13 +172,26 @@ SerialScans)
   rm -rf "$work/serial"
   inputs=(--preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz"
     --intraop-image "$case_dir/intraop_image.nii.gz")
-  "$brainshift" register "${inputs[@]}" --output-dir "$first" >/dev/null || fail "first scan exited $?"
+  # (the first scan with prototypes picked beforehand, as a user would: they are carried forward)
+  "$brainshift" register "${inputs[@]}" --output-dir "$first" --prototypes "$demo/classification_prototypes.json" >/dev/null ||
+    fail "first scan exited $?"
   "$brainshift" register "${inputs[@]}" --output-dir "$later" --previous "$first" >/dev/null || fail "later scan exited $?"
   [ "$(json_value "$later/report.json" "['stages']['rigid']['initialised_from']")" = "$first/rigid_intraop_to_preop.tfm" ] ||
     fail "the later scan's rigid registration did not start from the first's"
   [ "$(json_value "$later/report.json" "['stages']['rigid']['starts_scored']")" = "0" ] || fail "the later scan searched starts again"
   [ "$(json_value "$later/report.json" "['stages']['classify']['prototypes_from']")" = "$first/classification_prototypes.json" ] ||
-    fail "the later scan did not reuse the prototypes"
+    fail "the later scan did not reuse the picked prototypes"
+  # Prototypes a scan chose by itself are chosen afresh on the next (a mesh of another resolution
+  # is made anew too).
+  "$brainshift" register "${inputs[@]}" --output-dir "$work/serial/auto-1" --mesh-resolution 6 >/dev/null || fail "auto-1 exited $?"
+  "$brainshift" register "${inputs[@]}" --output-dir "$work/serial/auto-2" --mesh-resolution 5 --previous "$work/serial/auto-1" \
+    >/dev/null || fail "auto-2 exited $?"
+  [ "$(json_value "$work/serial/auto-2/report.json" "['stages']['classify']['prototypes_given']")" = "False" ] ||
+    fail "prototypes chosen automatically were reused"
+  [ "$(json_value "$work/serial/auto-2/report.json" "['stages']['mesh'].get('reused_from', '')")" = "" ] ||
+    fail "a mesh of another resolution was reused"
+  [ "$(json_value "$work/serial/auto-2/report.json" "['stages']['surface']['preop_boundary_from']")" = "" ] ||
+    fail "the preoperative fit of another mesh was reused"
   [ "$(json_value "$later/report.json" "['stages']['mesh']['reused_from']")" = "$first/mesh.vtu" ] || fail "the mesh was not reused"
   [ "$(json_value "$later/report.json" "['stages']['surface']['preop_boundary_from']")" = "$first/brain_surface.vtp" ] ||
     fail "the preoperative surface fit was not reused"
