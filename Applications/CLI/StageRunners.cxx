@@ -35,6 +35,17 @@ void runRigidStage(RunContext& context)
 {
   Stopwatch clock;
   RigidRegistrationParameters parameters;
+  // The pyramid's first levels and a share of the samples (the configuration's speed knobs).
+  const Configuration& configuration = context.configuration();
+  const std::size_t levels = std::min<std::size_t>(configuration.rigidLevels, parameters.levelSpacingMm.size());
+  parameters.levelSpacingMm.resize(levels);
+  parameters.iterationsPerLevel.resize(levels);
+  parameters.stepMmPerLevel.resize(levels);
+  parameters.minimumStepMmPerLevel.resize(levels);
+  parameters.samplesPerLevel.resize(levels);
+  for (unsigned& samples : parameters.samplesPerLevel) {
+    samples = std::max(1000u, unsigned(std::lround(samples * configuration.rigidSamplingFraction)));
+  }
   // A later scan starts from the previous scan's alignment instead of the multi-start search.
   const std::optional<fs::path> previousRigid = context.previousFile("rigid_intraop_to_preop.tfm");
   if (previousRigid) {

@@ -29,6 +29,8 @@ struct UpdateBenchOptions {
   std::vector<double> solverTolerances{1e-8, 1e-5}; ///< the last: the stage's default (the variants run it)
   std::vector<unsigned> surfaceIterations{200, 10};
   std::vector<double> shifts{5, 15};
+  std::vector<double> rigidSamplings{1.0, 0.5, 0.25}; ///< the rigid registration's share of samples
+  std::vector<unsigned> rigidLevels{3, 2};              ///< and pyramid levels (4, 2, 1 mm; 2: no 1 mm level)
   bool variants = true;
   bool serialScans = true; ///< a later scan of the default case after an earlier one (register --previous)
 };
@@ -38,6 +40,8 @@ struct Setting {
   double meshResolutionMm;
   double solverTolerance;
   unsigned surfaceIterations;
+  double rigidSampling = 1.0;
+  unsigned rigidLevels = 3;
 };
 
 void runUpdateBench(const UpdateBenchOptions& o)
@@ -78,7 +82,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
   std::ostringstream csv;
   csv << "case,method,mesh_resolution_mm,solver_rtol,surface_iterations,equations,total_seconds,rigid_seconds,classify_seconds,"
          "mesh_seconds,surface_seconds,simulate_seconds,simulate_solve_seconds,warp_seconds,tre_mean_mm,tre_p95_mm,tre_max_mm,"
-         "tre_craniotomy_mm,tre_near_cavity_mm,tre_brain_mm,folded_voxels\n";
+         "tre_craniotomy_mm,tre_near_cavity_mm,tre_brain_mm,folded_voxels,rigid_sampling,rigid_levels\n";
   // One `register` as a user runs it (every stage, files and all), timed; `previous`: an earlier
   // scan's output folder of the same case (empty: a first scan).
   struct Registration {
@@ -100,6 +104,8 @@ void runUpdateBench(const UpdateBenchOptions& o)
     run.solverOptions = solver.str();
     Configuration configuration = configurationFor(run);
     configuration.surfaceMaximumIterations = s.surfaceIterations;
+    configuration.rigidSamplingFraction = s.rigidSampling;
+    configuration.rigidLevels = s.rigidLevels;
     fs::create_directories(run.outputDir, ec);
     RunReport report(run.outputDir / "report.json");
     RunContext context(run, configuration, report);
@@ -123,9 +129,10 @@ void runUpdateBench(const UpdateBenchOptions& o)
     csv << tre.overall.meanMm << ',' << tre.overall.p95Mm << ',' << tre.overall.maxMm << ',' << group("craniotomy") << ','
         << group("near-cavity") << ',' << group("brain") << ',';
     if (!rigidOnly) csv << stages["warp"]["folded_voxels"].get<long long>();
-    csv << '\n';
-    std::printf("  %s, %s, mesh %.1f mm, rtol %.0e, surface %u iterations: TRE %.2f mm mean, %.2f p95, %.1f s\n", caseName.c_str(),
-                method.c_str(), s.meshResolutionMm, s.solverTolerance, s.surfaceIterations, tre.overall.meanMm, tre.overall.p95Mm,
+    csv << ',' << s.rigidSampling << ',' << s.rigidLevels << '\n';
+    std::printf("  %s, %s, mesh %.1f mm, rtol %.0e, surface %u iterations, rigid sampling %.2f, %u levels: TRE %.2f mm mean, "
+                "%.2f p95, %.1f s\n", caseName.c_str(), method.c_str(), s.meshResolutionMm, s.solverTolerance, s.surfaceIterations,
+                s.rigidSampling, s.rigidLevels, tre.overall.meanMm, tre.overall.p95Mm,
                 rigidOnly ? seconds("rigid") : r.seconds);
     std::fflush(stdout);
     writeTextFileAtomically(o.outputDir / "update_bench.csv", csv.str()); // as it goes: a long run can be read early
@@ -142,6 +149,16 @@ void runUpdateBench(const UpdateBenchOptions& o)
       for (double h : o.meshResolutions) {
         for (double tolerance : o.solverTolerances) {
           for (unsigned iterations : o.surfaceIterations) settings.push_back({named.name, h, tolerance, iterations});
+        }
+      }
+      // The rigid registration's sampling and pyramid, at the product's defaults otherwise.
+      for (double sampling : o.rigidSamplings) {
+        for (unsigned levels : o.rigidLevels) {
+          if (sampling == 1.0 && levels == 3) continue; // the default setting, run above
+          Setting rigid = defaultSetting;
+          rigid.rigidSampling = sampling;
+          rigid.rigidLevels = levels;
+          settings.push_back(rigid);
         }
       }
     } else { // the variants at the product's defaults
@@ -161,7 +178,8 @@ void runUpdateBench(const UpdateBenchOptions& o)
       }
       row(named.name, "brainshift", s, r, evaluateTransform(*readTransform(r.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
       if (o.serialScans && named.name == "default" && s.meshResolutionMm == defaultSetting.meshResolutionMm &&
-          s.solverTolerance == defaultSetting.solverTolerance && s.surfaceIterations == defaultSetting.surfaceIterations) {
+          s.solverTolerance == defaultSetting.solverTolerance && s.surfaceIterations == defaultSetting.surfaceIterations &&
+          s.rigidSampling == 1.0 && s.rigidLevels == 3) {
         // Serial scans: an earlier scan of the same case (the brain sunk by 5 mm, the tumour still
         // there) registered first, then this scan as the later one, reusing what the first prepared.
         CaseParameters early = named.parameters;
@@ -199,6 +217,8 @@ void addUpdateBenchCommand(CLI::App& bench)
   command->add_option("--solver-tolerances", o->solverTolerances, "relative solver tolerances")->delimiter(',')->capture_default_str();
   command->add_option("--surface-iterations", o->surfaceIterations, "active surface iteration limits")->delimiter(',')->capture_default_str();
   command->add_option("--shifts", o->shifts, "shift sizes of the variants, mm")->delimiter(',')->capture_default_str();
+  command->add_option("--rigid-samplings", o->rigidSamplings, "the rigid registration's shares of samples")->delimiter(',')->capture_default_str();
+  command->add_option("--rigid-levels", o->rigidLevels, "the rigid registration's pyramid levels (1 to 3)")->delimiter(',')->capture_default_str();
   command->add_flag("!--no-variants", o->variants, "only the default case");
   command->add_flag("!--no-serial-scans", o->serialScans, "no later scan of the default case after an earlier one");
   command->callback([o] {
@@ -210,6 +230,12 @@ void addUpdateBenchCommand(CLI::App& bench)
     }
     for (unsigned i : o->surfaceIterations) {
       if (i < 1) throw InputError("--surface-iterations: each must be at least 1");
+    }
+    for (double f : o->rigidSamplings) {
+      if (!(f >= 0.05 && f <= 4)) throw InputError("--rigid-samplings: each must be within 0.05 to 4");
+    }
+    for (unsigned l : o->rigidLevels) {
+      if (l < 1 || l > 3) throw InputError("--rigid-levels: each must be within 1 to 3");
     }
     runUpdateBench(*o);
   });

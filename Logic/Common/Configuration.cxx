@@ -42,7 +42,7 @@ Configuration Configuration::load(const fs::path& path)
   }
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
-  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "classification", "surface"}, file);
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface"}, file);
   if (document.contains("materials")) {
     const json& materials = document["materials"];
     if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
@@ -105,6 +105,18 @@ Configuration Configuration::load(const fs::path& path)
       configuration.classificationBiasCorrection = c["bias_correction"].get<bool>();
     }
   }
+  if (document.contains("rigid")) {
+    const json& c = document["rigid"];
+    if (!c.is_object()) throw InputError(file + ": \"rigid\" must be an object");
+    requireKnownKeys(c, {"sampling", "levels"}, file + ": rigid");
+    if (c.contains("sampling")) configuration.rigidSamplingFraction = number(c["sampling"], file + ": rigid.sampling");
+    if (c.contains("levels")) {
+      if (!c["levels"].is_number_integer() || c["levels"].get<long>() < 1) {
+        throw InputError(file + ": rigid.levels must be a whole number >= 1");
+      }
+      configuration.rigidLevels = c["levels"].get<unsigned>();
+    }
+  }
   if (document.contains("surface")) {
     const json& c = document["surface"];
     if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
@@ -149,6 +161,12 @@ void Configuration::validate(const std::string& source) const
   }
   for (int label : meshLabels) {
     if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
+  }
+  if (!std::isfinite(rigidSamplingFraction) || rigidSamplingFraction < 0.05 || rigidSamplingFraction > 4) {
+    throw InputError(source + ": rigid sampling " + std::to_string(rigidSamplingFraction) + " is outside 0.05 to 4");
+  }
+  if (rigidLevels < 1 || rigidLevels > 3) {
+    throw InputError(source + ": rigid levels " + std::to_string(rigidLevels) + " is outside 1 to 3");
   }
   if (classificationK < 1 || classificationK > 101) {
     throw InputError(source + ": classification k " + std::to_string(classificationK) + " is outside 1 to 101");

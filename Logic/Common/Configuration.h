@@ -24,6 +24,11 @@ struct Configuration {
   std::string meshBackend = "lattice"; ///< "lattice" or "cgal" (CGAL Mesh_3)
   std::string solverOptions; ///< PETSc options over the tuned default
   int ranks = 1;
+  /// Rigid registration: the share of the metric's samples at every level (1: 12,000, 30,000 and
+  /// 60,000 from the coarsest) and how many levels of the pyramid (4, 2, 1 mm) are run, coarsest
+  /// first (Testing/Benchmarks/results/update measures both).
+  double rigidSamplingFraction = 1.0;
+  unsigned rigidLevels = 3;
   /// Tissue classification: k of the k-NN, saturation of the spatial channels, N4 on or off.
   unsigned classificationK = 7;
   double classificationSaturationMm = 10.0;

@@ -46,11 +46,17 @@ def close(a, b):
     return a is not None and b is not None and abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1e-300)
 
 
+def default_rigid(r):
+    """The rigid registration at its defaults (all samples, 3 levels); older files have no such columns."""
+    sampling, levels = number(r.get("rigid_sampling")), number(r.get("rigid_levels"))
+    return (sampling is None or close(sampling, 1.0)) and (levels is None or close(levels, 3))
+
+
 def default_setting(rows):
     """The case's brainshift row at BrainShift's default setting; else its only brainshift row (the
     variants of an older run, at another setting); else the default mesh and iterations at the
     loosest tolerance; else None."""
-    candidates = [r for r in rows if r["method"] == "brainshift"]
+    candidates = [r for r in rows if r["method"] == "brainshift" and default_rigid(r)]
     for r in candidates:
         if (close(number(r["mesh_resolution_mm"]), DEFAULT_MESH_MM) and close(number(r["solver_rtol"]), DEFAULT_SOLVER_RTOL)
                 and close(number(r["surface_iterations"]), DEFAULT_SURFACE_ITERATIONS)):
@@ -64,8 +70,10 @@ def default_setting(rows):
 
 def setting_text(r):
     mesh, rtol, iterations = number(r["mesh_resolution_mm"]), number(r["solver_rtol"]), r["surface_iterations"]
+    rigid = [] if default_rigid(r) else [f"rigid {number(r['rigid_sampling']):g} of the samples, "
+                                         f"{int(number(r['rigid_levels']))} levels"]
     return ", ".join(([f"{mesh:g} mm"] if mesh is not None else []) + ([f"rtol {rtol:.0e}"] if rtol is not None else [])
-                     + ([f"{iterations} it."] if iterations else []))
+                     + ([f"{iterations} it."] if iterations else []) + rigid)
 
 
 def elastix_parameters(name):
@@ -285,9 +293,7 @@ def main():
     labelled = 0
     for t, e, r in sorted(everything, key=lambda p: p[0]):
         if (t, e) in set(front) and r["method"] == "brainshift":  # stacked: the front's settings are close in time
-            axis.annotate(f"{number(r['mesh_resolution_mm']):g} mm, rtol {number(r['solver_rtol']):.0e}, "
-                          f"{r['surface_iterations']} it", (t, e), fontsize=7, xytext=(4, -12 - 9 * labelled),
-                          textcoords="offset points")
+            axis.annotate(setting_text(r), (t, e), fontsize=7, xytext=(4, -12 - 9 * labelled), textcoords="offset points")
             labelled += 1
     axis.axhline(TRE_MEAN_TARGET, color="grey", linestyle="--", linewidth=0.8, label=f"target {TRE_MEAN_TARGET:g} mm")
     axis.axvline(FIRST_SCAN_SECONDS, color="grey", linestyle=":", linewidth=0.8, label=f"first scan {FIRST_SCAN_SECONDS:g} s")
@@ -307,11 +313,11 @@ def main():
 
     columns = ["case", "method", "mesh (mm)", "rtol", "surface it.", "equations", "total (s)", "rigid", "classify", "mesh",
                "surface", "simulate", "solve", "warp", "TRE mean", "p95", "max", "craniotomy", "near cavity", "brain",
-               "folded voxels"]
+               "folded voxels", "rigid samples", "rigid levels"]
     keys = ["case", "method", "mesh_resolution_mm", "solver_rtol", "surface_iterations", "equations", "total_seconds",
             "rigid_seconds", "classify_seconds", "mesh_seconds", "surface_seconds", "simulate_seconds",
             "simulate_solve_seconds", "warp_seconds", "tre_mean_mm", "tre_p95_mm", "tre_max_mm", "tre_craniotomy_mm",
-            "tre_near_cavity_mm", "tre_brain_mm", "folded_voxels"]
+            "tre_near_cavity_mm", "tre_brain_mm", "folded_voxels", "rigid_sampling", "rigid_levels"]
 
     def cell(key, value):
         if value in ("", None):
@@ -331,7 +337,7 @@ def main():
              "",
              table_row(columns), table_row(["---"] * len(columns))]
     for r in rows:
-        cells = [cell(k, r[k]) for k in keys]
+        cells = [cell(k, r.get(k, "")) for k in keys]
         if r["case"] == "default" and (number(r["total_seconds"]), number(r["tre_mean_mm"])) in front_set:
             cells[1] = r["method"] + " *"
         lines.append(table_row(cells))

@@ -23,11 +23,14 @@ int ConfigurationTest(int, char*[])
     }
     BS_CHECK(shipped.meshLabels == defaults.meshLabels);
     BS_CHECK_NEAR(shipped.meshResolutionMm, defaults.meshResolutionMm, 0);
+    BS_CHECK_NEAR(shipped.rigidSamplingFraction, defaults.rigidSamplingFraction, 0);
+    BS_CHECK(shipped.rigidLevels == defaults.rigidLevels && defaults.rigidLevels == 3);
 
     const fs::path file = folder / "config.json";
     writeTextFileAtomically(file, R"({"materials": {"4": {"youngs_modulus_pa": 20000}},
                                       "mesh": {"resolution_mm": 2.5, "labels": [2, 3]},
-                                      "solver": {"options": "-ksp_type gmres -pc_type bjacobi"}})");
+                                      "solver": {"options": "-ksp_type gmres -pc_type bjacobi"},
+                                      "rigid": {"sampling": 0.5, "levels": 2}})");
     const Configuration c = Configuration::load(file);
     BS_CHECK_NEAR(c.materials.at(4).youngsModulusPa, 20000.0, 0);
     BS_CHECK_NEAR(c.materials.at(4).poissonRatio, 0.45, 0); // the rest of label 4 keeps its default
@@ -35,6 +38,8 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(c.meshResolutionMm, 2.5, 0);
     BS_CHECK((c.meshLabels == std::vector<int>{2, 3}));
     BS_CHECK(c.solverOptions == "-ksp_type gmres -pc_type bjacobi");
+    BS_CHECK_NEAR(c.rigidSamplingFraction, 0.5, 0);
+    BS_CHECK(c.rigidLevels == 2);
 
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
@@ -48,6 +53,9 @@ int ConfigurationTest(int, char*[])
     refused(R"({"mesh": {"resolution_mm": 0.01}})", "mesh resolution");
     refused(R"({"mesh": {"labels": []}})", "empty");
     refused(R"({"meshes": {}})", "unknown key \"meshes\"");
+    refused(R"({"rigid": {"levels": 4}})", "rigid levels");
+    refused(R"({"rigid": {"sampling": 0}})", "rigid sampling");
+    refused(R"({"rigid": {"pyramid": 2}})", "unknown key \"pyramid\"");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
