@@ -40,6 +40,21 @@ struct ImageGeometry {
   /// "181x217x181 voxels of 1x1x1 mm, origin (90, 125, -71)".
   std::string describe() const;
   std::size_t numberOfVoxels() const { return size[0] * size[1] * size[2]; }
+
+  /// An allocated, uninitialised image of any pixel type on this grid.
+  template <class TImage>
+  typename TImage::Pointer allocate() const
+  {
+    auto image = TImage::New();
+    typename TImage::RegionType region;
+    region.SetSize(size);
+    image->SetRegions(region);
+    image->SetSpacing(spacing);
+    image->SetOrigin(origin);
+    image->SetDirection(direction);
+    image->Allocate();
+    return image;
+  }
 };
 
 } // namespace brainshift

@@ -141,8 +141,13 @@ nlohmann::json readReportOf(const fs::path& folder)
 /// Whether two fingerprints are of the same preoperative data.
 bool sameCase(const nlohmann::json& a, const nlohmann::json& b)
 {
+  if (!a.is_object() || !b.is_object()) return false;
   for (const char* key : {"preop_image", "preop_labels"}) {
-    if (!a.contains(key) || !b.contains(key) || a[key].value("fingerprint", "") != b[key].value("fingerprint", "")) return false;
+    if (!a.contains(key) || !b.contains(key) || !a[key].is_object() || !b[key].is_object()) return false;
+    const auto fingerprint = [&](const nlohmann::json& entry) {
+      return entry.contains("fingerprint") && entry["fingerprint"].is_string() ? entry["fingerprint"].get<std::string>() : std::string();
+    };
+    if (fingerprint(a[key]).empty() || fingerprint(a[key]) != fingerprint(b[key])) return false;
   }
   return true;
 }

@@ -107,7 +107,9 @@ void runClassifyStage(RunContext& context)
   } else {
     const nlohmann::json& previous = context.previousReport();
     const bool previousWereGiven = previous.contains("stages") && previous["stages"].contains("classify") &&
-                                   previous["stages"]["classify"].value("prototypes_given", false);
+                                   previous["stages"]["classify"].is_object() &&
+                                   previous["stages"]["classify"].contains("prototypes_given") &&
+                                   previous["stages"]["classify"]["prototypes_given"] == true;
     if (previousWereGiven) prototypesFile = context.previousFile("classification_prototypes.json");
   }
   if (prototypesFile) prototypes = readPrototypes(*prototypesFile);
@@ -203,22 +205,30 @@ void runMeshStage(RunContext& context)
   // previous scan's mesh when it was made with the same settings.
   const std::optional<fs::path> previousMesh = context.previousFile("mesh.vtu");
   const nlohmann::json& previousReport = context.previousReport();
-  if (previousMesh && previousReport.contains("stages") && previousReport["stages"].contains("mesh")) {
-    const nlohmann::json& before = previousReport["stages"]["mesh"];
-    if (before.value("resolution_mm", -1.0) == parameters.resolutionMm && before.value("backend", "") == configuration.meshBackend &&
-        before.value("labels", std::vector<int>{}) == parameters.labels) {
-      vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(*previousMesh));
-      if (!mesh) throw InputError(previousMesh->string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-      mesh->GetPointData()->RemoveArray("Displacement"); // the previous scan's solution
-      mesh->GetPointData()->RemoveArray("DisplacementMagnitude");
-      writeModel(mesh, context.output("mesh.vtu"));
-      nlohmann::json entry = before;
-      entry["wall_seconds"] = clock.seconds();
-      entry["reused_from"] = previousMesh->string();
-      context.report().setStage("mesh", entry);
-      std::printf("  mesh: %lld nodes, reused from the previous scan, %.2f s\n", before.value("nodes", 0LL), clock.seconds());
-      return;
+  const nlohmann::json* before = nullptr;
+  if (previousMesh && previousReport.contains("stages") && previousReport["stages"].contains("mesh")) before = &previousReport["stages"]["mesh"];
+  bool sameSettings = false;
+  if (before) {
+    try {
+      sameSettings = before->value("resolution_mm", -1.0) == parameters.resolutionMm &&
+                     before->value("backend", "") == configuration.meshBackend &&
+                     before->value("labels", std::vector<int>{}) == parameters.labels;
+    } catch (const nlohmann::json::exception&) { // an entry of another shape: mesh anew
+      sameSettings = false;
     }
+  }
+  if (sameSettings) {
+    vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(*previousMesh));
+    if (!mesh) throw InputError(previousMesh->string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+    mesh->GetPointData()->RemoveArray("Displacement"); // the previous scan's solution
+    mesh->GetPointData()->RemoveArray("DisplacementMagnitude");
+    writeModel(mesh, context.output("mesh.vtu"));
+    nlohmann::json entry = *before;
+    entry["wall_seconds"] = clock.seconds();
+    entry["reused_from"] = previousMesh->string();
+    context.report().setStage("mesh", entry);
+    std::printf("  mesh: %lld nodes, reused from the previous scan, %.2f s\n", entry.value("nodes", 0LL), clock.seconds());
+    return;
   }
   const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
   writeModel(result.mesh, context.output("mesh.vtu"));

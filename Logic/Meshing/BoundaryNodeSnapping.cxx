@@ -1,4 +1,5 @@
 #include "BoundaryNodeSnapping.h"
+#include "TetrahedronGeometry.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,10 +10,7 @@
 namespace brainshift {
 
 namespace {
-using Vec = std::array<double, 3>;
-Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec cross(const Vec& a, const Vec& b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
-double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+using namespace tetrahedron_geometry;
 
 /// Positive volume and every dihedral angle within [theta, 180 - theta] (|cos| <= cos theta).
 bool wellShaped(const Vec p[4], double cosineBound)

@@ -1,4 +1,5 @@
 #include "LabelMapMesher.h"
+#include "TetrahedronGeometry.h"
 
 #include "BoundaryNodeSnapping.h"
 #include "CgalLabelMapMesher.h"
@@ -23,11 +24,7 @@
 namespace brainshift {
 
 namespace {
-using Vec = std::array<double, 3>;
-Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec cross(const Vec& a, const Vec& b) { return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}; }
-double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-double norm(const Vec& a) { return std::sqrt(dot(a, a)); }
+using namespace tetrahedron_geometry;
 
 vtkSmartPointer<vtkUnstructuredGrid> toUnstructuredGrid(const TetrahedralMeshArrays& arrays)
 {
@@ -52,7 +49,6 @@ vtkSmartPointer<vtkUnstructuredGrid> toUnstructuredGrid(const TetrahedralMeshArr
   return mesh;
 }
 
-double signedVolume(const Vec p[4]) { return dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0]))) / 6.0; }
 
 /// The six dihedral angles (degrees) of a tetrahedron.
 std::array<double, 6> dihedralAngles(const Vec p[4])
@@ -356,18 +352,34 @@ void keepLargestFaceConnectedPart(TetrahedralMeshArrays& arrays, Warnings& warni
     while (parent[a] != a) a = parent[a] = parent[parent[a]];
     return a;
   };
+  // Tetrahedra around each node (compressed rows); two tetrahedra share a face when one of them,
+  // found around the face's first node, holds the face's other two nodes as well.
+  std::vector<std::size_t> start(arrays.points.size() + 1, 0), around(4 * n);
+  for (const auto& t : arrays.tetrahedra) {
+    for (long long v : t) start[std::size_t(v) + 1] += 1;
+  }
+  for (std::size_t v = 0; v < arrays.points.size(); ++v) start[v + 1] += start[v];
+  {
+    std::vector<std::size_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t t = 0; t < n; ++t) {
+      for (long long v : arrays.tetrahedra[t]) around[fill[std::size_t(v)]++] = t;
+    }
+  }
+  auto holds = [&](std::size_t t, long long v) {
+    const auto& q = arrays.tetrahedra[t];
+    return q[0] == v || q[1] == v || q[2] == v || q[3] == v;
+  };
   static const int faces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-  std::unordered_map<std::string, std::size_t> firstWithFace;
-  firstWithFace.reserve(2 * n);
   for (std::size_t t = 0; t < n; ++t) {
+    const auto& q = arrays.tetrahedra[t];
     for (const auto& f : faces) {
-      std::array<long long, 3> key{arrays.tetrahedra[t][std::size_t(f[0])], arrays.tetrahedra[t][std::size_t(f[1])],
-                                   arrays.tetrahedra[t][std::size_t(f[2])]};
-      std::sort(key.begin(), key.end());
-      const auto [at, inserted] = firstWithFace.emplace(std::string(reinterpret_cast<const char*>(key.data()), sizeof(key)), t);
-      if (!inserted) {
-        const std::size_t a = find(t), b = find(at->second);
-        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      const long long a = q[std::size_t(f[0])], b = q[std::size_t(f[1])], c = q[std::size_t(f[2])];
+      for (std::size_t k = start[std::size_t(a)]; k < start[std::size_t(a) + 1]; ++k) {
+        const std::size_t u = around[k];
+        if (u <= t || !holds(u, b) || !holds(u, c)) continue; // each pair once, from its first
+        const std::size_t x = find(t), y = find(u);
+        if (x != y) parent[std::max(x, y)] = std::min(x, y);
+        break; // a face has at most one other tetrahedron
       }
     }
   }

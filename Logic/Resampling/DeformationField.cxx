@@ -60,19 +60,6 @@ GridMaps gridMapsOf(const SpatialTransform& rigid, const ImageGeometry& grid)
   return g;
 }
 
-template <class TImage>
-typename TImage::Pointer imageOn(const ImageGeometry& grid)
-{
-  auto image = TImage::New();
-  typename TImage::RegionType region;
-  region.SetSize(grid.size);
-  image->SetRegions(region);
-  image->SetSpacing(grid.spacing);
-  image->SetOrigin(grid.origin);
-  image->SetDirection(grid.direction);
-  image->Allocate();
-  return image;
-}
 
 ScalarImage::Pointer gaussian(const ScalarImage::Pointer& image, double sigmaMm)
 {
@@ -173,7 +160,7 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
 
   // -- Outside the mesh: the correction fades out, w = G*(w m) / G*m * min(1, 2 G*m).
   const auto fallbackStart = std::chrono::steady_clock::now();
-  auto maskImage = imageOn<ScalarImage>(grid);
+  auto maskImage = grid.allocate<ScalarImage>();
   for (std::size_t i = 0; i < voxels; ++i) maskImage->GetBufferPointer()[i] = located[i] ? 1.0f : 0.0f;
   result.meshVoxels = std::size_t(std::count(located.begin(), located.end(), 1));
   double largestCorrection = 0;
@@ -187,7 +174,7 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   result.fallbackSigmaMm = sigma;
   const ScalarImage::Pointer maskSmoothed = gaussian(maskImage, sigma);
   for (int d = 0; d < 3; ++d) {
-    auto component = imageOn<ScalarImage>(grid);
+    auto component = grid.allocate<ScalarImage>();
     float* c = component->GetBufferPointer();
     for (std::size_t i = 0; i < voxels; ++i) c[i] = located[i] ? correction[3 * i + std::size_t(d)] : 0.0f;
     const ScalarImage::Pointer smoothed = gaussian(component, sigma);
@@ -201,7 +188,7 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   result.fallbackSeconds = secondsSince(fallbackStart);
 
   // -- The whole mapping: x = R(y) + w, d = x - y.
-  result.field = imageOn<DisplacementFieldImage>(grid);
+  result.field = grid.allocate<DisplacementFieldImage>();
   DisplacementVector* field = result.field->GetBufferPointer();
   for (long k = 0; k < nz; ++k) {
     for (long j = 0; j < ny; ++j) {
@@ -218,7 +205,7 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
 
   // -- Folding: det of the Jacobian of y -> x (central differences in index space, then physical).
   const auto jacobianStart = std::chrono::steady_clock::now();
-  result.jacobianDeterminant = imageOn<ScalarImage>(grid);
+  result.jacobianDeterminant = grid.allocate<ScalarImage>();
   float* jacobian = result.jacobianDeterminant->GetBufferPointer();
   const Mat physicalToIndex = maps.indexToPhysical.inverse();
   result.minimumJacobian = std::numeric_limits<double>::infinity();

@@ -27,15 +27,7 @@ ImageGeometry grid(const ScalarImage::SizeType& size, const std::array<double, 3
 template <class TImage>
 typename TImage::Pointer makeImage(const ImageGeometry& geometry)
 {
-  auto image = TImage::New();
-  typename TImage::RegionType region;
-  region.SetSize(geometry.size);
-  image->SetRegions(region);
-  image->SetSpacing(geometry.spacing);
-  image->SetOrigin(geometry.origin);
-  image->SetDirection(geometry.direction);
-  image->Allocate();
-  return image;
+  return geometry.allocate<TImage>();
 }
 
 /// An image of `size` voxels of 1 mm at the origin, axis-aligned, every voxel `value`.

@@ -140,6 +140,26 @@ void sphereShrinks()
     for (int k = 0; k < 3; ++k) BS_CHECK(displacement->GetComponent(i, k) == other->GetComponent(i, k));
   }
 
+  // A later scan reuses the preoperative fit found by this one (PreopBoundary): the same answer,
+  // without fitting the preoperative labels again.
+  BS_CHECK(s->GetPointData()->GetArray("PreopBoundary") != nullptr);
+  const ActiveSurfaceResult reused =
+    deformBrainSurface(mesh.mesh, preop.GetPointer(), *intraop, image.GetPointer(), *rigid, parameters, {}, s);
+  vtkDataArray* reusedDisplacement = reused.surface->GetPointData()->GetArray("Displacement");
+  double largest = 0;
+  for (vtkIdType i = 0; i < s->GetNumberOfPoints(); ++i) {
+    for (int k = 0; k < 3; ++k) largest = std::max(largest, std::abs(displacement->GetComponent(i, k) - reusedDisplacement->GetComponent(i, k)));
+  }
+  BS_CHECK_MSG(largest < 1e-9, largest);
+  // A surface of another mesh is refused, by name.
+  MeshingParameters coarser = meshing;
+  coarser.resolutionMm = 4.0;
+  const LabelMapMesh otherMesh = meshLabelMap(*preop, coarser);
+  ActiveSurfaceInputNames names;
+  names.previousSurface = "scan-1/brain_surface.vtp";
+  BS_CHECK_THROWS(deformBrainSurface(otherMesh.mesh, preop.GetPointer(), *intraop, image.GetPointer(), *rigid, parameters, names, s),
+                  InputError, "scan-1/brain_surface.vtp");
+
   // Segmentation alone (no image term) also lands.
   ActiveSurfaceParameters segmentationOnly;
   segmentationOnly.imageWeight = 0;
