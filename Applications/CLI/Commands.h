@@ -18,6 +18,8 @@ struct RunOptions {
   std::optional<int> ranks;
   std::optional<double> meshResolutionMm;
   std::optional<std::string> meshBackend;
+  std::optional<double> meshGrading;
+  std::vector<double> meshRegionOfInterest; ///< x, y, z (LPS mm), radius mm; empty: the configuration's
   std::optional<std::string> solverOptions;
   std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
   /// An earlier scan's output folder of the same case (register --previous): its rigid transform

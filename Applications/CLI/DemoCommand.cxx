@@ -112,6 +112,7 @@ void addDemoCommand(CLI::App& app)
   command->add_option("--bias", options->bias, "bias field strength (log amplitude)")->capture_default_str();
   command->add_option("--config", options->run.config, "JSON configuration for register");
   command->add_option("--mesh-resolution", options->run.meshResolutionMm, "for register: tetrahedron edge length, mm");
+  command->add_option("--mesh-grading", options->run.meshGrading, "for register: mesh grading (0: uniform)");
   command->add_option("--ranks", options->run.ranks, "for register: MPI ranks of the finite element worker");
   command->add_option("--solver-options", options->run.solverOptions, "for register: PETSc options");
 

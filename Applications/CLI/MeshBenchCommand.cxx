@@ -1,6 +1,6 @@
 // brainshift bench mesh: the meshing backends on the built-in full brain (its preoperative labels)
 // over a range of resolutions: wall time, size, quality and each tissue's volume against its
-// voxels. Charts: Testing/Benchmarks/mesh/.
+// voxels. "graded" is the lattice with graded resolution (fine at the interfaces, coarser inside). Charts: Testing/Benchmarks/mesh/.
 #include "AtomicFile.h"
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
@@ -19,7 +19,8 @@ struct MeshBenchOptions {
   std::filesystem::path outputDir;
   std::string size = "full";
   std::vector<double> resolutions{1.5, 2, 3, 4, 5, 6};
-  std::vector<std::string> backends{"lattice", "cgal"};
+  std::vector<std::string> backends{"lattice", "graded", "cgal"};
+  double grading = 1.0; ///< of the "graded" lattice
 };
 
 void runMeshBench(const MeshBenchOptions& o)
@@ -37,6 +38,7 @@ void runMeshBench(const MeshBenchOptions& o)
       MeshingParameters mp;
       mp.resolutionMm = h;
       mp.backend = backend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
+      if (backend == "graded") mp.gradingRate = o.grading;
       Stopwatch clock;
       LabelMapMesh mesh;
       try {
@@ -71,10 +73,14 @@ void addMeshBenchCommand(CLI::App& bench)
   command->add_option("--output-dir", options->outputDir, "where the measurements go")->required();
   command->add_option("--size", options->size, "full or small case")->capture_default_str();
   command->add_option("--resolutions", options->resolutions, "mesh resolutions, mm")->delimiter(',')->capture_default_str();
-  command->add_option("--backends", options->backends, "lattice, cgal")->delimiter(',')->capture_default_str();
+  command->add_option("--backends", options->backends, "lattice (uniform), graded (the lattice graded), cgal")
+      ->delimiter(',')
+      ->capture_default_str();
+  command->add_option("--grading", options->grading, "the graded lattice's grading (mm of size per mm of distance)")
+      ->capture_default_str();
   command->callback([options] {
     for (const std::string& b : options->backends) {
-      if (b != "lattice" && b != "cgal") throw InputError("--backends: '" + b + "' is neither lattice nor cgal");
+      if (b != "lattice" && b != "graded" && b != "cgal") throw InputError("--backends: '" + b + "' is not lattice, graded or cgal");
     }
     runMeshBench(*options);
   });

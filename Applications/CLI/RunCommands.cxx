@@ -38,6 +38,13 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
     command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 4)");
     command->add_option("--mesh-backend", options.meshBackend,
                         "lattice (Kuhn lattice, boundary nodes snapped; default) or cgal (CGAL Mesh_3)");
+    command->add_option("--mesh-grading", options.meshGrading,
+                        "lattice: element size grows by this many mm per mm away from the tissue interfaces, the brain's "
+                        "surface and the region of interest (0: uniform)");
+    command->add_option("--mesh-roi", options.meshRegionOfInterest,
+                        "X,Y,Z,R: a sphere (LPS centre and radius, mm) meshed at --mesh-resolution throughout")
+        ->delimiter(',')
+        ->expected(4);
   }
   if (solverFlags) {
     command->add_option("--ranks", options.ranks, "MPI ranks of the finite element worker (default 1)");
@@ -51,6 +58,13 @@ Configuration configurationFor(const RunOptions& options)
   Configuration configuration = options.config.empty() ? Configuration{} : Configuration::load(options.config);
   if (options.meshResolutionMm) configuration.meshResolutionMm = *options.meshResolutionMm;
   if (options.meshBackend) configuration.meshBackend = *options.meshBackend;
+  if (options.meshGrading) configuration.meshGrading = *options.meshGrading;
+  if (!options.meshRegionOfInterest.empty()) {
+    if (options.meshRegionOfInterest.size() != 4) throw InputError("--mesh-roi needs four numbers: X,Y,Z,R (LPS mm)");
+    for (int d = 0; d < 3; ++d) configuration.meshRegionOfInterestCenterLps[std::size_t(d)] = options.meshRegionOfInterest[std::size_t(d)];
+    configuration.meshRegionOfInterestRadiusMm = options.meshRegionOfInterest[3];
+    if (!(configuration.meshRegionOfInterestRadiusMm > 0)) throw InputError("--mesh-roi: the radius must be positive");
+  }
   if (options.solverOptions) configuration.solverOptions = *options.solverOptions;
   if (options.ranks) configuration.ranks = *options.ranks;
   configuration.validate(options.config.empty() ? "command line" : "command line and " + options.config.string());

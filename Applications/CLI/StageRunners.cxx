@@ -201,6 +201,13 @@ void runMeshStage(RunContext& context)
   parameters.resolutionMm = configuration.meshResolutionMm;
   parameters.labels = configuration.meshLabels;
   parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
+  parameters.gradingRate = configuration.meshGrading;
+  parameters.coarseningLevels = configuration.meshCoarseningLevels;
+  nlohmann::json regionOfInterest = nullptr;
+  if (configuration.meshRegionOfInterestRadiusMm > 0) {
+    parameters.regionOfInterest = MeshingParameters::Sphere{configuration.meshRegionOfInterestCenterLps, configuration.meshRegionOfInterestRadiusMm};
+    regionOfInterest = {{"center_lps", configuration.meshRegionOfInterestCenterLps}, {"radius_mm", configuration.meshRegionOfInterestRadiusMm}};
+  }
   // A later scan of the same case (same preoperative labels, checked by register) reuses the
   // previous scan's mesh when it was made with the same settings.
   const std::optional<fs::path> previousMesh = context.previousFile("mesh.vtu");
@@ -212,7 +219,10 @@ void runMeshStage(RunContext& context)
     try {
       sameSettings = before->value("resolution_mm", -1.0) == parameters.resolutionMm &&
                      before->value("backend", "") == configuration.meshBackend &&
-                     before->value("labels", std::vector<int>{}) == parameters.labels;
+                     before->value("labels", std::vector<int>{}) == parameters.labels &&
+                     before->value("grading", -1.0) == parameters.gradingRate &&
+                     before->value("coarsening_levels", -1) == parameters.coarseningLevels &&
+                     before->value("region_of_interest", nlohmann::json()) == regionOfInterest;
     } catch (const nlohmann::json::exception&) { // an entry of another shape: mesh anew
       sameSettings = false;
     }
@@ -242,6 +252,9 @@ void runMeshStage(RunContext& context)
                                      {"backend", configuration.meshBackend},
                                      {"resolution_mm", parameters.resolutionMm},
                                      {"labels", parameters.labels},
+                                     {"grading", parameters.gradingRate},
+                                     {"coarsening_levels", parameters.coarseningLevels},
+                                     {"region_of_interest", regionOfInterest},
                                      {"nodes", q.nodes},
                                      {"tetrahedra", q.tetrahedra},
                                      {"equations", 3 * q.nodes},

@@ -26,6 +26,7 @@ struct UpdateBenchOptions {
   fs::path outputDir;
   std::string size = "full";
   std::vector<double> meshResolutions{3, 4, 5, 6};
+  std::vector<double> meshGradings{0, 1}; ///< uniform, and graded (finer at the interfaces, coarser inside)
   std::vector<double> solverTolerances{1e-8, 1e-5}; ///< the last: the stage's default (the variants run it)
   std::vector<unsigned> surfaceIterations{200, 10};
   std::vector<double> shifts{5, 15};
@@ -42,6 +43,7 @@ struct Setting {
   unsigned surfaceIterations;
   double rigidSampling = 1.0;
   unsigned rigidLevels = 3;
+  double meshGrading = 0.0;
 };
 
 void runUpdateBench(const UpdateBenchOptions& o)
@@ -82,7 +84,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
   std::ostringstream csv;
   csv << "case,method,mesh_resolution_mm,solver_rtol,surface_iterations,equations,total_seconds,rigid_seconds,classify_seconds,"
          "mesh_seconds,surface_seconds,simulate_seconds,simulate_solve_seconds,warp_seconds,tre_mean_mm,tre_p95_mm,tre_max_mm,"
-         "tre_craniotomy_mm,tre_near_cavity_mm,tre_brain_mm,folded_voxels,rigid_sampling,rigid_levels\n";
+         "tre_craniotomy_mm,tre_near_cavity_mm,tre_brain_mm,folded_voxels,rigid_sampling,rigid_levels,mesh_grading\n";
   // One `register` as a user runs it (every stage, files and all), timed; `previous`: an earlier
   // scan's output folder of the same case (empty: a first scan).
   struct Registration {
@@ -99,6 +101,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
     run.outputDir = outputDir;
     run.previous = previous;
     run.meshResolutionMm = s.meshResolutionMm;
+    run.meshGrading = s.meshGrading;
     std::ostringstream solver;
     solver << "-ksp_rtol " << s.solverTolerance;
     run.solverOptions = solver.str();
@@ -129,16 +132,17 @@ void runUpdateBench(const UpdateBenchOptions& o)
     csv << tre.overall.meanMm << ',' << tre.overall.p95Mm << ',' << tre.overall.maxMm << ',' << group("craniotomy") << ','
         << group("near-cavity") << ',' << group("brain") << ',';
     if (!rigidOnly) csv << stages["warp"]["folded_voxels"].get<long long>();
-    csv << ',' << s.rigidSampling << ',' << s.rigidLevels << '\n';
-    std::printf("  %s, %s, mesh %.1f mm, rtol %.0e, surface %u iterations, rigid sampling %.2f, %u levels: TRE %.2f mm mean, "
-                "%.2f p95, %.1f s\n", caseName.c_str(), method.c_str(), s.meshResolutionMm, s.solverTolerance, s.surfaceIterations,
+    csv << ',' << s.rigidSampling << ',' << s.rigidLevels << ',' << s.meshGrading << '\n';
+    std::printf("  %s, %s, mesh %.1f mm grading %g, rtol %.0e, surface %u iterations, rigid sampling %.2f, %u levels: TRE %.2f mm mean, "
+                "%.2f p95, %.1f s\n", caseName.c_str(), method.c_str(), s.meshResolutionMm, s.meshGrading, s.solverTolerance, s.surfaceIterations,
                 s.rigidSampling, s.rigidLevels, tre.overall.meanMm, tre.overall.p95Mm,
                 rigidOnly ? seconds("rigid") : r.seconds);
     std::fflush(stdout);
     writeTextFileAtomically(o.outputDir / "update_bench.csv", csv.str()); // as it goes: a long run can be read early
   };
   const Configuration productDefaults;
-  const Setting defaultSetting{"default", productDefaults.meshResolutionMm, o.solverTolerances.back(), productDefaults.surfaceMaximumIterations};
+  Setting defaultSetting{"default", productDefaults.meshResolutionMm, o.solverTolerances.back(), productDefaults.surfaceMaximumIterations};
+  defaultSetting.meshGrading = productDefaults.meshGrading;
 
   for (const NamedCase& named : cases) {
     const SimulatedCase simulated = simulateCase(named.parameters);
@@ -147,8 +151,14 @@ void runUpdateBench(const UpdateBenchOptions& o)
     std::vector<Setting> settings;
     if (named.name == "default") {
       for (double h : o.meshResolutions) {
-        for (double tolerance : o.solverTolerances) {
-          for (unsigned iterations : o.surfaceIterations) settings.push_back({named.name, h, tolerance, iterations});
+        for (double grading : o.meshGradings) {
+          for (double tolerance : o.solverTolerances) {
+            for (unsigned iterations : o.surfaceIterations) {
+              Setting setting{named.name, h, tolerance, iterations};
+              setting.meshGrading = grading;
+              settings.push_back(setting);
+            }
+          }
         }
       }
       // The rigid registration's sampling and pyramid, at the product's defaults otherwise.
@@ -169,7 +179,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
     bool rigidRecorded = false;
     for (const Setting& s : settings) {
       std::ostringstream tag;
-      tag << "mesh" << s.meshResolutionMm << "-rtol" << s.solverTolerance << "-surf" << s.surfaceIterations;
+      tag << "mesh" << s.meshResolutionMm << "-grading" << s.meshGrading << "-rtol" << s.solverTolerance << "-surf" << s.surfaceIterations;
       const Registration r = registerCase(files, work / named.name / tag.str(), s, {});
       if (!rigidRecorded) { // the rigid registration alone, as the reference point
         const RegistrationError rigid = evaluateTransform(*readTransform(r.outputDir / "rigid_intraop_to_preop.tfm"), simulated.landmarks);
@@ -179,7 +189,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
       row(named.name, "brainshift", s, r, evaluateTransform(*readTransform(r.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
       if (o.serialScans && named.name == "default" && s.meshResolutionMm == defaultSetting.meshResolutionMm &&
           s.solverTolerance == defaultSetting.solverTolerance && s.surfaceIterations == defaultSetting.surfaceIterations &&
-          s.rigidSampling == 1.0 && s.rigidLevels == 3) {
+          s.meshGrading == defaultSetting.meshGrading && s.rigidSampling == 1.0 && s.rigidLevels == 3) {
         // Serial scans: an earlier scan of the same case (the brain sunk by 5 mm, the tumour still
         // there) registered first, then this scan as the later one, reusing what the first prepared.
         CaseParameters early = named.parameters;
@@ -214,6 +224,7 @@ void addUpdateBenchCommand(CLI::App& bench)
   command->add_option("--output-dir", o->outputDir, "where the measurements go")->required();
   command->add_option("--size", o->size, "full or small case")->capture_default_str();
   command->add_option("--mesh-resolutions", o->meshResolutions, "mesh resolutions, mm")->delimiter(',')->capture_default_str();
+  command->add_option("--mesh-gradings", o->meshGradings, "mesh gradings (0: uniform)")->delimiter(',')->capture_default_str();
   command->add_option("--solver-tolerances", o->solverTolerances, "relative solver tolerances")->delimiter(',')->capture_default_str();
   command->add_option("--surface-iterations", o->surfaceIterations, "active surface iteration limits")->delimiter(',')->capture_default_str();
   command->add_option("--shifts", o->shifts, "shift sizes of the variants, mm")->delimiter(',')->capture_default_str();
@@ -224,6 +235,9 @@ void addUpdateBenchCommand(CLI::App& bench)
   command->callback([o] {
     for (double h : o->meshResolutions) {
       if (!(h >= 1 && h <= 10)) throw InputError("--mesh-resolutions: each must be within 1 to 10 mm");
+    }
+    for (double g : o->meshGradings) {
+      if (!(g >= 0 && g <= 10)) throw InputError("--mesh-gradings: each must be within 0 (uniform) to 10");
     }
     for (double t : o->solverTolerances) {
       if (!(t > 0 && t < 1)) throw InputError("--solver-tolerances: each must be within 0 and 1");

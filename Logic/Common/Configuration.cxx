@@ -67,7 +67,26 @@ Configuration Configuration::load(const fs::path& path)
   if (document.contains("mesh")) {
     const json& mesh = document["mesh"];
     if (!mesh.is_object()) throw InputError(file + ": \"mesh\" must be an object");
-    requireKnownKeys(mesh, {"resolution_mm", "labels", "backend"}, file + ": mesh");
+    requireKnownKeys(mesh, {"resolution_mm", "labels", "backend", "grading", "coarsening_levels", "region_of_interest"}, file + ": mesh");
+    if (mesh.contains("grading")) configuration.meshGrading = number(mesh["grading"], file + ": mesh.grading");
+    if (mesh.contains("coarsening_levels")) {
+      if (!mesh["coarsening_levels"].is_number_integer()) throw InputError(file + ": mesh.coarsening_levels must be a whole number");
+      configuration.meshCoarseningLevels = mesh["coarsening_levels"].get<int>();
+    }
+    if (mesh.contains("region_of_interest")) {
+      const json& roi = mesh["region_of_interest"];
+      const std::string where = file + ": mesh.region_of_interest";
+      if (!roi.is_object()) throw InputError(where + " must be an object {\"center_lps\": [x, y, z], \"radius_mm\": r}");
+      requireKnownKeys(roi, {"center_lps", "radius_mm"}, where);
+      if (!roi.contains("center_lps") || !roi["center_lps"].is_array() || roi["center_lps"].size() != 3) {
+        throw InputError(where + ".center_lps must be a list of three numbers (LPS mm)");
+      }
+      for (int d = 0; d < 3; ++d) {
+        configuration.meshRegionOfInterestCenterLps[std::size_t(d)] = number(roi["center_lps"][std::size_t(d)], where + ".center_lps");
+      }
+      if (!roi.contains("radius_mm")) throw InputError(where + ".radius_mm is missing");
+      configuration.meshRegionOfInterestRadiusMm = number(roi["radius_mm"], where + ".radius_mm");
+    }
     if (mesh.contains("backend")) {
       if (!mesh["backend"].is_string()) throw InputError(file + ": mesh.backend must be \"lattice\" or \"cgal\"");
       configuration.meshBackend = mesh["backend"].get<std::string>();
@@ -156,6 +175,18 @@ void Configuration::validate(const std::string& source) const
     throw InputError(source + ": mesh resolution " + std::to_string(meshResolutionMm) + " mm is outside 0.5 to 50 mm");
   }
   if (meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
+  if (!std::isfinite(meshGrading) || meshGrading < 0 || meshGrading > 10) {
+    throw InputError(source + ": mesh grading " + std::to_string(meshGrading) + " is outside 0 (uniform) to 10");
+  }
+  if (meshCoarseningLevels < 0 || meshCoarseningLevels > 4) {
+    throw InputError(source + ": mesh coarsening levels " + std::to_string(meshCoarseningLevels) + " is outside 0 to 4");
+  }
+  if (!std::isfinite(meshRegionOfInterestRadiusMm) || meshRegionOfInterestRadiusMm < 0 || meshRegionOfInterestRadiusMm > 500 ||
+      !std::isfinite(meshRegionOfInterestCenterLps[0]) || !std::isfinite(meshRegionOfInterestCenterLps[1]) ||
+      !std::isfinite(meshRegionOfInterestCenterLps[2])) {
+    throw InputError(source + ": mesh region of interest radius " + std::to_string(meshRegionOfInterestRadiusMm) +
+                     " mm (or its centre) is not a finite size within 0 to 500 mm");
+  }
   if (meshBackend != "lattice" && meshBackend != "cgal") {
     throw InputError(source + ": mesh backend \"" + meshBackend + "\" is neither \"lattice\" nor \"cgal\"");
   }

@@ -1,6 +1,7 @@
 #pragma once
 // The run configuration (--config, JSON; ../shared/CONTRACT.md). Every key is optional; the
 // defaults are Resources/Configurations/default.json's and the README's. Flags override the file.
+#include <array>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -22,6 +23,14 @@ struct Configuration {
   double meshResolutionMm = 4.0;
   std::vector<int> meshLabels{2, 3, 4};
   std::string meshBackend = "lattice"; ///< "lattice" or "cgal" (CGAL Mesh_3)
+  /// Graded lattice: element size grows by this many mm per mm of distance from the tissue
+  /// interfaces, the brain's surface and the region of interest (0: uniform), up to
+  /// 2^meshCoarseningLevels times the resolution.
+  double meshGrading = 0.0;
+  int meshCoarseningLevels = 2;
+  /// A sphere meshed at the resolution throughout: LPS centre and radius, mm (radius 0: none).
+  std::array<double, 3> meshRegionOfInterestCenterLps{};
+  double meshRegionOfInterestRadiusMm = 0.0;
   std::string solverOptions; ///< PETSc options over the tuned default
   int ranks = 1;
   /// Rigid registration: the share of the metric's samples at every level (1: 12,000, 30,000 and

@@ -3,6 +3,7 @@
 
 #include "BoundaryNodeSnapping.h"
 #include "CgalLabelMapMesher.h"
+#include "GradedKuhnLattice.h"
 
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
@@ -14,6 +15,7 @@
 #include <algorithm>
 #include <cstring>
 #include <cstdint>
+#include <limits>
 #include <numeric>
 #include <string>
 #include <array>
@@ -103,136 +105,205 @@ void MeshingParameters::validate(const LabelImage& image) const
     throw InputError(m.str());
   }
   if (labels.empty()) throw InputError("meshing: no tissue labels to mesh");
+  if (!std::isfinite(gradingRate) || gradingRate < 0 || gradingRate > 10) {
+    std::ostringstream m;
+    m << "mesh grading " << gradingRate << " is outside 0 (uniform) to 10 mm of element size per mm of distance";
+    throw InputError(m.str());
+  }
+  if (coarseningLevels < 0 || coarseningLevels > 4) {
+    throw InputError("mesh coarsening levels " + std::to_string(coarseningLevels) + " is outside 0 to 4");
+  }
+  if (regionOfInterest) {
+    const Sphere& roi = *regionOfInterest;
+    if (!std::isfinite(roi.radiusMm) || roi.radiusMm <= 0 || !std::isfinite(roi.centerLps[0]) || !std::isfinite(roi.centerLps[1]) ||
+        !std::isfinite(roi.centerLps[2])) {
+      std::ostringstream m;
+      m << "mesh region of interest: centre (" << roi.centerLps[0] << ", " << roi.centerLps[1] << ", " << roi.centerLps[2]
+        << ") mm, radius " << roi.radiusMm << " mm: need a finite centre and a positive radius";
+      throw InputError(m.str());
+    }
+  }
 }
 
 namespace {
-/// The Kuhn lattice of the chosen tissues' index box [lo, hi], labelled, repaired and snapped.
-TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
-                                  const long lo[3], const long hi[3], Warnings& warnings)
+/// Distance (mm) from each cell of the fine lattice to the nearest cell where the mesh must be
+/// fine: one whose voxels hold two classes (a tissue interface, or a tissue against the outside)
+/// or whose centre lies in the region of interest. Chamfer distance (3x3x3, two passes).
+std::vector<float> distanceToFeatures(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
+                                      const double start[3], const double step[3], const std::array<int, 3>& cells)
 {
   const auto size = image.GetLargestPossibleRegion().GetSize();
   const LabelPixel* voxels = image.GetBufferPointer();
-  // Lattice in continuous index space: steps of h / spacing voxels, covering the box with a margin.
-  double step[3];
-  long cells[3];
-  double start[3];
-  for (int d = 0; d < 3; ++d) {
-    step[d] = parameters.resolutionMm / image.GetSpacing()[unsigned(d)];
-    start[d] = double(lo[d]) - 0.5 - 0.5 * step[d];
-    cells[d] = long(std::ceil((double(hi[d]) + 0.5 - start[d]) / step[d]));
+  const std::size_t cellCount = std::size_t(cells[0]) * std::size_t(cells[1]) * std::size_t(cells[2]);
+  const float far = std::numeric_limits<float>::max();
+  std::vector<float> distance(cellCount, far);
+  auto cellIndex = [&](long i, long j, long k) { return std::size_t(i) + std::size_t(cells[0]) * (std::size_t(j) + std::size_t(cells[1]) * std::size_t(k)); };
+  for (long k = 0; k < cells[2]; ++k) {
+    for (long j = 0; j < cells[1]; ++j) {
+      for (long i = 0; i < cells[0]; ++i) {
+        const long cell[3] = {i, j, k};
+        // The voxels whose centres the cell spans, and at least the nearest one along each axis.
+        long from[3], to[3];
+        bool outsideImage = false;
+        for (int d = 0; d < 3; ++d) {
+          const double a = start[d] + double(cell[d]) * step[d], b = a + step[d];
+          from[d] = std::max(0L, long(std::floor(a)));
+          to[d] = std::min(long(size[unsigned(d)]) - 1, long(std::ceil(b)));
+          if (from[d] > to[d]) outsideImage = true;
+        }
+        int first = -1;
+        bool mixed = false;
+        if (outsideImage) first = 0;
+        for (long z = from[2]; z <= to[2] && !mixed && !outsideImage; ++z) {
+          for (long y = from[1]; y <= to[1] && !mixed; ++y) {
+            const LabelPixel* row = voxels + size[0] * (std::size_t(y) + size[1] * std::size_t(z));
+            for (long x = from[0]; x <= to[0]; ++x) {
+              const int c = chosen.count(row[x]) ? int(row[x]) : 0;
+              if (first < 0) first = c;
+              else if (c != first) {
+                mixed = true;
+                break;
+              }
+            }
+          }
+        }
+        // Cells touching the image's border from outside hold only "outside"; the brain's surface
+        // is found from the cells inside.
+        if (mixed) distance[cellIndex(i, j, k)] = 0;
+      }
+    }
   }
-  auto tissueAt = [&](const double c[3]) -> int {
-    long idx[3];
-    for (int d = 0; d < 3; ++d) {
-      idx[d] = std::lround(c[d]);
-      if (idx[d] < 0 || idx[d] >= long(size[unsigned(d)])) return 0;
+  if (parameters.regionOfInterest) {
+    const auto& roi = *parameters.regionOfInterest;
+    for (long k = 0; k < cells[2]; ++k) {
+      for (long j = 0; j < cells[1]; ++j) {
+        for (long i = 0; i < cells[0]; ++i) {
+          itk::ContinuousIndex<double, 3> c;
+          c[0] = start[0] + (double(i) + 0.5) * step[0];
+          c[1] = start[1] + (double(j) + 0.5) * step[1];
+          c[2] = start[2] + (double(k) + 0.5) * step[2];
+          PhysicalPoint p;
+          image.TransformContinuousIndexToPhysicalPoint(c, p);
+          double r2 = 0;
+          for (int d = 0; d < 3; ++d) r2 += (p[d] - roi.centerLps[std::size_t(d)]) * (p[d] - roi.centerLps[std::size_t(d)]);
+          if (r2 <= roi.radiusMm * roi.radiusMm) distance[cellIndex(i, j, k)] = 0;
+        }
+      }
     }
-    return voxels[std::size_t(idx[0]) + size[0] * (std::size_t(idx[1]) + size[1] * std::size_t(idx[2]))];
+  }
+  // Two chamfer passes: the cells are cubes of resolutionMm.
+  const float h = float(parameters.resolutionMm);
+  const float w[4] = {0.0f, h, h * float(std::sqrt(2.0)), h * float(std::sqrt(3.0))};
+  for (int pass = 0; pass < 2; ++pass) {
+    const int sign = pass == 0 ? 1 : -1;
+    for (long kk = 0; kk < cells[2]; ++kk) {
+      const long k = pass == 0 ? kk : cells[2] - 1 - kk;
+      for (long jj = 0; jj < cells[1]; ++jj) {
+        const long j = pass == 0 ? jj : cells[1] - 1 - jj;
+        for (long ii = 0; ii < cells[0]; ++ii) {
+          const long i = pass == 0 ? ii : cells[0] - 1 - ii;
+          float best = distance[cellIndex(i, j, k)];
+          // The 13 neighbours already visited in this pass's order.
+          for (int dk = -1; dk <= 0; ++dk) {
+            for (int dj = -1; dj <= 1; ++dj) {
+              for (int di = -1; di <= 1; ++di) {
+                if (dk == 0 && (dj > 0 || (dj == 0 && di >= 0))) continue;
+                const long a = i + sign * di, b = j + sign * dj, c = k + sign * dk;
+                if (a < 0 || b < 0 || c < 0 || a >= cells[0] || b >= cells[1] || c >= cells[2]) continue;
+                const float there = distance[cellIndex(a, b, c)];
+                if (there < far) best = std::min(best, there + w[std::abs(di) + std::abs(dj) + std::abs(dk)]);
+              }
+            }
+          }
+          distance[cellIndex(i, j, k)] = best;
+        }
+      }
+    }
+  }
+  return distance;
+}
+
+/// Topology repair: labelling by centroid can leave a region touching itself only along an edge
+/// (a non-manifold edge: four boundary triangles on it). Around such an edge the tetrahedra that
+/// separate the region's wedges join the region, until every boundary edge of the union of
+/// tissues and of each tissue has exactly two triangles. `tissueOf` is -1 for the unmeshed.
+std::size_t repairNonManifoldEdges(const KuhnLattice& lattice, std::vector<int>& tissueOf, const std::set<int>& chosen, Warnings& warnings)
+{
+  const std::size_t n = lattice.tetrahedra.size();
+  // Only the tetrahedra touching a meshed one can take part.
+  std::vector<char> nodeNearTissue(lattice.nodes.size(), 0);
+  for (std::size_t t = 0; t < n; ++t) {
+    if (tissueOf[t] < 0) continue;
+    for (int v : lattice.tetrahedra[t]) nodeNearTissue[std::size_t(v)] = 1;
+  }
+  std::vector<int> near;
+  for (std::size_t t = 0; t < n; ++t) {
+    const auto& q = lattice.tetrahedra[t];
+    if (nodeNearTissue[std::size_t(q[0])] || nodeNearTissue[std::size_t(q[1])] || nodeNearTissue[std::size_t(q[2])] ||
+        nodeNearTissue[std::size_t(q[3])]) {
+      near.push_back(int(t));
+    }
+  }
+  // Tetrahedra around each node (compressed rows) and the neighbour across each face.
+  std::vector<int> start(lattice.nodes.size() + 1, 0), around(4 * near.size());
+  for (int t : near) {
+    for (int v : lattice.tetrahedra[std::size_t(t)]) start[std::size_t(v) + 1] += 1;
+  }
+  for (std::size_t v = 0; v < lattice.nodes.size(); ++v) start[v + 1] += start[v];
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (int t : near) {
+      for (int v : lattice.tetrahedra[std::size_t(t)]) around[std::size_t(fill[std::size_t(v)]++)] = t;
+    }
+  }
+  auto holds = [&](int t, int v) {
+    const auto& q = lattice.tetrahedra[std::size_t(t)];
+    return q[0] == v || q[1] == v || q[2] == v || q[3] == v;
   };
-  std::unordered_map<long long, vtkIdType> nodeOf;
-  vtkNew<vtkPoints> points;
-  points->SetDataTypeToDouble();
-  auto node = [&](long i, long j, long k) {
-    const long long key = (long long)i + (long long)(cells[0] + 1) * ((long long)j + (long long)(cells[1] + 1) * k);
-    auto [at, inserted] = nodeOf.emplace(key, points->GetNumberOfPoints());
-    if (inserted) {
-      itk::ContinuousIndex<double, 3> c;
-      c[0] = start[0] + double(i) * step[0];
-      c[1] = start[1] + double(j) * step[1];
-      c[2] = start[2] + double(k) * step[2];
-      PhysicalPoint p;
-      image.TransformContinuousIndexToPhysicalPoint(c, p);
-      points->InsertNextPoint(p[0], p[1], p[2]);
+  static const int faceCorners[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  std::vector<int> nearIndex(n, -1);
+  for (std::size_t r = 0; r < near.size(); ++r) nearIndex[std::size_t(near[r])] = int(r);
+  std::vector<std::array<int, 4>> across(near.size());
+  for (int t : near) {
+    const auto& q = lattice.tetrahedra[std::size_t(t)];
+    std::array<int, 4> neighbours{-1, -1, -1, -1};
+    for (int f = 0; f < 4; ++f) {
+      const int a = q[std::size_t(faceCorners[f][0])], b = q[std::size_t(faceCorners[f][1])], c = q[std::size_t(faceCorners[f][2])];
+      for (int r = start[std::size_t(a)]; r < start[std::size_t(a) + 1]; ++r) {
+        const int u = around[std::size_t(r)];
+        if (u != t && holds(u, b) && holds(u, c)) {
+          neighbours[std::size_t(f)] = u;
+          break;
+        }
+      }
     }
-    return at->second;
-  };
-  // Every lattice tetrahedron's tissue (-1: not meshed), by its centroid.
-  const int paths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  const long long cellCount = (long long)cells[0] * cells[1] * cells[2];
-  std::vector<int> tissueOf(std::size_t(cellCount * 6), -1);
-  auto cornersOf = [&](long long tet, long corner[4][3]) {
-    const long long cell = tet / 6;
-    const int p = int(tet % 6);
-    long c[3] = {long(cell % cells[0]), long((cell / cells[0]) % cells[1]), long(cell / ((long long)cells[0] * cells[1]))};
-    std::copy(c, c + 3, corner[0]);
-    for (int s = 0; s < 3; ++s) {
-      c[paths[p][s]] += 1;
-      std::copy(c, c + 3, corner[s + 1]);
-    }
-  };
-  auto nodeKey = [&](const long q[3]) { return (long long)q[0] + (long long)(cells[0] + 1) * ((long long)q[1] + (long long)(cells[1] + 1) * q[2]); };
-  // The lattice tetrahedron sharing the face opposite corner `f` of tetrahedron `t` (-1 beyond the
-  // lattice). Path (a, b, c): across corner 0 lies path (b, c, a) of the cell + e_a, across corner
-  // 3 path (c, a, b) of the cell - e_c, across corners 1 and 2 the paths (b, a, c) and (a, c, b)
-  // of the same cell.
-  int pathIndex[3][3][3] = {};
-  for (int p = 0; p < 6; ++p) pathIndex[paths[p][0]][paths[p][1]][paths[p][2]] = p;
-  auto neighbourAcross = [&](long long t, int f) -> long long {
-    const long long cell = t / 6;
-    const int* path = paths[t % 6];
-    const int a = path[0], b = path[1], c = path[2];
-    long q[3] = {long(cell % cells[0]), long((cell / cells[0]) % cells[1]), long(cell / ((long long)cells[0] * cells[1]))};
-    int p = 0;
-    if (f == 0) {
-      q[a] += 1;
-      p = pathIndex[b][c][a];
-    } else if (f == 1) {
-      p = pathIndex[b][a][c];
-    } else if (f == 2) {
-      p = pathIndex[a][c][b];
-    } else {
-      q[c] -= 1;
-      p = pathIndex[c][a][b];
-    }
-    for (int d = 0; d < 3; ++d) {
-      if (q[d] < 0 || q[d] >= cells[d]) return -1;
-    }
-    return ((long long)q[0] + (long long)cells[0] * ((long long)q[1] + (long long)cells[1] * q[2])) * 6 + p;
-  };
-  for (long long t = 0; t < cellCount * 6; ++t) {
-    long corner[4][3];
-    cornersOf(t, corner);
-    double centroid[3] = {0, 0, 0};
-    for (const auto& q : corner) {
-      for (int d = 0; d < 3; ++d) centroid[d] += (start[d] + double(q[d]) * step[d]) / 4.0;
-    }
-    const int tissue = tissueAt(centroid);
-    if (chosen.count(tissue)) tissueOf[std::size_t(t)] = tissue;
+    across[std::size_t(nearIndex[std::size_t(t)])] = neighbours;
   }
 
-  // Topology repair: labelling by centroid can leave a region touching itself only along an edge
-  // (a non-manifold edge: four boundary triangles on it). Around such an edge the lattice
-  // tetrahedra that separate the region's wedges join the region, until every boundary edge of
-  // the union of tissues and of each tissue has exactly two triangles.
-  static const int faceCorners[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
   std::size_t repaired = 0;
+  std::vector<char> joined(n, 0);
+  std::size_t remaining = 0; // non-manifold edges seen in the last pass
   for (int pass = 0; pass < 30; ++pass) {
     bool changed = false;
+    remaining = 0;
     std::vector<int> regions{-2}; // -2: the union of the chosen tissues
     regions.insert(regions.end(), chosen.begin(), chosen.end());
     for (int region : regions) {
-      auto inRegion = [&](long long t) {
+      auto inRegion = [&](int t) {
+        if (t < 0) return false;
         const int l = tissueOf[std::size_t(t)];
         return region == -2 ? l >= 0 : l == region;
       };
-      // A face of a tetrahedron in the region is on the region's boundary when the lattice
-      // tetrahedron across it is not in the region; edges of three or more such faces are
-      // non-manifold. Edges are keyed by their two node keys in one 64-bit integer.
       std::unordered_map<std::uint64_t, int> edgeCount;
-      for (long long t = 0; t < cellCount * 6; ++t) {
+      for (int t : near) {
         if (!inRegion(t)) continue;
-        long corner[4][3];
-        bool cornersKnown = false;
+        const auto& q = lattice.tetrahedra[std::size_t(t)];
+        const auto& neighbours = across[std::size_t(nearIndex[std::size_t(t)])];
         for (int f = 0; f < 4; ++f) {
-          const long long across = neighbourAcross(t, f);
-          if (across >= 0 && inRegion(across)) continue;
-          if (!cornersKnown) {
-            cornersOf(t, corner);
-            cornersKnown = true;
-          }
+          if (inRegion(neighbours[std::size_t(f)])) continue;
           for (int e = 0; e < 3; ++e) {
-            const long long u = nodeKey(corner[faceCorners[f][e]]), w = nodeKey(corner[faceCorners[f][(e + 1) % 3]]);
-            edgeCount[(std::uint64_t(std::min(u, w)) << 32) | std::uint64_t(std::max(u, w))] += 1;
+            const std::uint64_t u = std::uint64_t(q[std::size_t(faceCorners[f][e])]), w = std::uint64_t(q[std::size_t(faceCorners[f][(e + 1) % 3])]);
+            edgeCount[(std::min(u, w) << 32) | std::max(u, w)] += 1;
           }
         }
       }
@@ -241,57 +312,32 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
         if (count > 2) nonManifold.push_back(key);
       }
       std::sort(nonManifold.begin(), nonManifold.end()); // a fixed order: the repairs depend on it
+      remaining += nonManifold.size();
       for (std::uint64_t key : nonManifold) {
-        const std::pair<long long, long long> edge{(long long)(key >> 32), (long long)(key & 0xffffffffu)};
-        // The lattice tetrahedra around the edge, in the cells that hold both of its ends.
-        auto decode = [&](long long k, long q[3]) {
-          q[0] = long(k % (cells[0] + 1));
-          q[1] = long((k / (cells[0] + 1)) % (cells[1] + 1));
-          q[2] = long(k / ((long long)(cells[0] + 1) * (cells[1] + 1)));
-        };
-        long a[3], b[3];
-        decode(edge.first, a);
-        decode(edge.second, b);
-        std::vector<long long> ring;
-        std::map<int, int> around;
-        long range[3][2];
-        for (int d = 0; d < 3; ++d) {
-          range[d][0] = a[d] == b[d] ? a[d] - 1 : std::min(a[d], b[d]);
-          range[d][1] = std::min(a[d], b[d]);
-        }
-        for (long k = range[2][0]; k <= range[2][1]; ++k) {
-          for (long j = range[1][0]; j <= range[1][1]; ++j) {
-            for (long i = range[0][0]; i <= range[0][1]; ++i) {
-              if (i < 0 || j < 0 || k < 0 || i >= cells[0] || j >= cells[1] || k >= cells[2]) continue;
-              for (int p = 0; p < 6; ++p) {
-                const long long t = ((long long)i + (long long)cells[0] * ((long long)j + (long long)cells[1] * k)) * 6 + p;
-                long corner[4][3];
-                cornersOf(t, corner);
-                bool hasA = false, hasB = false;
-                for (const auto& q : corner) {
-                  hasA = hasA || (q[0] == a[0] && q[1] == a[1] && q[2] == a[2]);
-                  hasB = hasB || (q[0] == b[0] && q[1] == b[1] && q[2] == b[2]);
-                }
-                if (!hasA || !hasB) continue;
-                ring.push_back(t);
-                if (inRegion(t)) around[tissueOf[std::size_t(t)]] += 1;
-              }
-            }
-          }
+        const int a = int(key >> 32), b = int(key & 0xffffffffu);
+        std::vector<int> ring;
+        std::map<int, int> count;
+        for (int r = start[std::size_t(a)]; r < start[std::size_t(a) + 1]; ++r) {
+          const int t = around[std::size_t(r)];
+          if (!holds(t, b)) continue;
+          ring.push_back(t);
+          if (inRegion(t)) count[tissueOf[std::size_t(t)]] += 1;
         }
         int fill = region;
         if (region == -2) { // the most common tissue around the edge
           int best = 0;
-          for (const auto& [l, n] : around) {
-            if (n > best) {
-              best = n;
+          for (const auto& [l, c] : count) {
+            if (c > best) {
+              best = c;
               fill = l;
             }
           }
         }
-        for (long long t : ring) {
-          if (!inRegion(t)) {
+        for (int t : ring) {
+          // A tetrahedron changes tissue once: two tissues must not trade it back and forth.
+          if (!inRegion(t) && !joined[std::size_t(t)]) {
             tissueOf[std::size_t(t)] = fill;
+            joined[std::size_t(t)] = 1;
             ++repaired;
             changed = true;
           }
@@ -299,41 +345,105 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
       }
     }
     if (!changed) break;
-    if (pass == 29) {
-      warnings.push_back("mesh: the topology repair did not settle in 30 passes; some surfaces may stay non-manifold");
-    }
   }
+  if (remaining > 0) {
+    warnings.push_back("mesh: " + std::to_string(remaining) + " tissue surface edges stay non-manifold after the topology repair");
+  }
+  return repaired;
+}
+
+/// The (graded) Kuhn lattice of the chosen tissues' index box [lo, hi], labelled, repaired and
+/// snapped.
+TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
+                                  const long lo[3], const long hi[3], Warnings& warnings)
+{
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
+  // Fine lattice in continuous index space: steps of h / spacing voxels, covering the box with a
+  // margin.
+  double step[3], start[3];
+  std::array<int, 3> cells{};
+  for (int d = 0; d < 3; ++d) {
+    step[d] = parameters.resolutionMm / image.GetSpacing()[unsigned(d)];
+    start[d] = double(lo[d]) - 0.5 - 0.5 * step[d];
+    cells[std::size_t(d)] = int(std::ceil((double(hi[d]) + 0.5 - start[d]) / step[d]));
+  }
+  const bool graded = parameters.gradingRate > 0 && parameters.coarseningLevels > 0;
+  std::vector<float> distance;
+  if (graded) distance = distanceToFeatures(image, parameters, chosen, start, step, cells);
+  const double h = parameters.resolutionMm;
+  // A tetrahedron of a cube of edge s (mm) is bisected unless every point of it (within s of its
+  // centroid) is far enough from the features for that size: s <= h + rate * distance.
+  auto wantsFiner = [&](const std::array<double, 3>& centroid, double cubeEdge) {
+    std::size_t index = 0, stride = 1;
+    for (int d = 0; d < 3; ++d) {
+      const int c = std::clamp(int(std::floor(centroid[std::size_t(d)])), 0, cells[std::size_t(d)] - 1);
+      index += stride * std::size_t(c);
+      stride *= std::size_t(cells[std::size_t(d)]);
+    }
+    const double s = cubeEdge * h;
+    const double clearance = std::max(0.0, double(distance[index]) - s);
+    return s > h + parameters.gradingRate * clearance + 1e-9;
+  };
+  const KuhnLattice lattice = buildGradedKuhnLattice(cells, graded ? parameters.coarseningLevels : 0, wantsFiner);
+
+  auto tissueAt = [&](const double c[3]) -> int {
+    long idx[3];
+    for (int d = 0; d < 3; ++d) {
+      idx[d] = std::lround(c[d]);
+      if (idx[d] < 0 || idx[d] >= long(size[unsigned(d)])) return 0;
+    }
+    return voxels[std::size_t(idx[0]) + size[0] * (std::size_t(idx[1]) + size[1] * std::size_t(idx[2]))];
+  };
+  // Every lattice tetrahedron's tissue (-1: not meshed), by its centroid.
+  std::vector<int> tissueOf(lattice.tetrahedra.size(), -1);
+  for (std::size_t t = 0; t < lattice.tetrahedra.size(); ++t) {
+    double centroid[3] = {0, 0, 0};
+    for (int v : lattice.tetrahedra[t]) {
+      for (int d = 0; d < 3; ++d) centroid[d] += (start[d] + double(lattice.nodes[std::size_t(v)][std::size_t(d)]) * step[d]) / 4.0;
+    }
+    const int tissue = tissueAt(centroid);
+    if (chosen.count(tissue)) tissueOf[t] = tissue;
+  }
+  const std::size_t repaired = repairNonManifoldEdges(lattice, tissueOf, chosen, warnings);
   if (repaired > 0) {
     warnings.push_back("mesh: " + std::to_string(repaired) +
-                              " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
+                       " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
   }
 
   TetrahedralMeshArrays arrays;
-  for (long long t = 0; t < cellCount * 6; ++t) {
-    const int tissue = tissueOf[std::size_t(t)];
+  std::vector<long long> newIndex(lattice.nodes.size(), -1);
+  for (std::size_t t = 0; t < lattice.tetrahedra.size(); ++t) {
+    const int tissue = tissueOf[t];
     if (tissue < 0) continue;
-    long corner[4][3];
-    cornersOf(t, corner);
-    std::array<long long, 4> ids;
+    std::array<long long, 4> ids{};
     Vec p[4];
     for (int v = 0; v < 4; ++v) {
-      ids[std::size_t(v)] = node(corner[v][0], corner[v][1], corner[v][2]);
-      points->GetPoint(ids[std::size_t(v)], p[v].data());
+      const int node = lattice.tetrahedra[t][std::size_t(v)];
+      long long& id = newIndex[std::size_t(node)];
+      if (id < 0) {
+        id = (long long)arrays.points.size();
+        itk::ContinuousIndex<double, 3> c;
+        for (int d = 0; d < 3; ++d) c[unsigned(d)] = start[d] + double(lattice.nodes[std::size_t(node)][std::size_t(d)]) * step[d];
+        PhysicalPoint x;
+        image.TransformContinuousIndexToPhysicalPoint(c, x);
+        arrays.points.push_back({x[0], x[1], x[2]});
+      }
+      ids[std::size_t(v)] = id;
+      p[v] = arrays.points[std::size_t(id)];
     }
-    if (signedVolume(p) < 0) std::swap(ids[2], ids[3]); // the image's direction may mirror the lattice
+    if (signedVolume(p) < 0) std::swap(ids[2], ids[3]); // Maubach's order and the image's direction set the sign
     arrays.tetrahedra.push_back(ids);
     arrays.labels.push_back(tissue);
   }
-  arrays.points.resize(std::size_t(points->GetNumberOfPoints()));
-  for (vtkIdType v = 0; v < points->GetNumberOfPoints(); ++v) points->GetPoint(v, arrays.points[std::size_t(v)].data());
   if (parameters.snapToBoundaries) {
     SnappingParameters snapping;
     snapping.minimumDihedralDegrees = parameters.minimumDihedralDegrees;
     const std::vector<int> tissues(chosen.begin(), chosen.end());
     const SnappingSummary s = snapInterfaceNodes(arrays, image, tissues, snapping);
-      if (s.nodesPartlyMoved > s.interfaceNodes / 10) {
+    if (s.nodesPartlyMoved > s.interfaceNodes / 10) {
       warnings.push_back("mesh: " + std::to_string(s.nodesPartlyMoved) + " of " + std::to_string(s.interfaceNodes) +
-                                " interface nodes stopped short of the tissue boundary to keep the elements' quality");
+                         " interface nodes stopped short of the tissue boundary to keep the elements' quality");
     }
   }
   return arrays;
@@ -452,6 +562,9 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
   if (voxelCount.empty()) throw InputError("meshing: the label map holds none of the tissues to mesh");
   for (int l : chosen) {
     if (!voxelCount.count(l)) throw InputError("meshing: tissue label " + std::to_string(l) + " is not in the label map");
+  }
+  if (parameters.backend == MeshingBackend::Cgal && parameters.gradingRate > 0) {
+    result.warnings.push_back("mesh: the CGAL backend meshes at one size; the grading applies to the lattice backend only");
   }
   TetrahedralMeshArrays arrays = parameters.backend == MeshingBackend::Cgal
                                      ? meshLabelMapWithCgal(image, parameters)

@@ -1,8 +1,11 @@
 #pragma once
 // A conforming tetrahedral mesh of several tissues of a label map at once (Warfield et al. built
-// theirs in the spirit of marching tetrahedra): a Kuhn lattice of cubes of the target edge length,
-// each cut into six tetrahedra that share faces with their neighbours by construction, each
-// tetrahedron taking the tissue at its centroid. No hanging nodes; the tissues share their faces.
+// theirs in the spirit of marching tetrahedra): a Kuhn lattice of cubes, each cut into six
+// tetrahedra that share faces with their neighbours by construction, each tetrahedron taking the
+// tissue at its centroid. Graded: the cubes have the target edge length near every tissue
+// interface, the brain's outer surface and a region of interest, and grow (up to 2^levels times)
+// with the distance from them, refined by conforming bisection (GradedKuhnLattice.h): no
+// hanging nodes; the tissues share their faces.
 // The nodes on a tissue interface or the outer boundary are then moved onto the label map's
 // boundaries (BoundaryNodeSnapping.h), each move guarded so that no dihedral angle leaves
 // [12, 168] degrees and no element inverts: the surfaces follow the tissues, not a staircase, and
@@ -12,8 +15,7 @@
 //
 // The CGAL Mesh_3 backend (CgalLabelMapMesher.h) gives the same output: LPS mm, cell array Label,
 // only the chosen tissues, positive tetrahedra.
-//
-// Not yet (issue 5): graded resolution.
+// The CGAL backend meshes at a uniform size (grading is the lattice's).
 #include "BrainShiftErrors.h"
 #include "ImageTypes.h"
 
@@ -21,7 +23,9 @@
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
 
+#include <array>
 #include <map>
+#include <optional>
 #include <set>
 #include <vector>
 
@@ -37,6 +41,16 @@ struct MeshingParameters {
   std::vector<int> labels{2, 3, 4};   ///< the tissues meshed
   bool snapToBoundaries = true;       ///< move interface nodes onto the label boundaries
   double minimumDihedralDegrees = 12; ///< no snapping move takes an element's dihedral angle below this
+  /// Graded resolution (lattice): away from the features (tissue interfaces, the outer surface,
+  /// the region of interest) the cube edge may grow by this many mm per mm of distance; 0 keeps
+  /// the lattice uniform. The coarsest cubes are 2^coarseningLevels times resolutionMm.
+  double gradingRate = 0.0;
+  int coarseningLevels = 2;
+  struct Sphere {
+    std::array<double, 3> centerLps{};
+    double radiusMm = 0;
+  };
+  std::optional<Sphere> regionOfInterest; ///< meshed at resolutionMm throughout
   void validate(const LabelImage& labels) const;
 };
 

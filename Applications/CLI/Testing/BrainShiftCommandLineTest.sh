@@ -368,6 +368,21 @@ MeshStage)
   printf '{"mesh": {"labels": [2, 9]}}' > "$out/nine.json"
   expect 2 "tissue label 9" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out" \
     --config "$out/nine.json"
+  # Graded: fewer nodes than the uniform lattice at the same resolution; the settings reported.
+  "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/graded" --mesh-resolution 4 \
+    --mesh-grading 1 --mesh-roi=-20,10,30,15 >/dev/null || fail "graded mesh exited $?"
+  "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/uniform" --mesh-resolution 4 \
+    >/dev/null || fail "uniform mesh exited $?"
+  graded_nodes=$(json_value "$out/graded/report.json" "['stages']['mesh']['nodes']")
+  uniform_nodes=$(json_value "$out/uniform/report.json" "['stages']['mesh']['nodes']")
+  [ "$graded_nodes" -lt "$uniform_nodes" ] || fail "graded mesh: $graded_nodes nodes, not fewer than the uniform $uniform_nodes"
+  [ "$(json_value "$out/graded/report.json" "['stages']['mesh']['grading']")" = "1.0" ] || fail "report.json lacks mesh.grading"
+  [ "$(json_value "$out/graded/report.json" "['stages']['mesh']['region_of_interest']['radius_mm']")" = "15.0" ] ||
+    fail "report.json lacks mesh.region_of_interest"
+  expect 2 "--mesh-roi" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/bad" \
+    --mesh-roi=1,2,3,-4
+  expect 2 "mesh grading" -- "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/bad" \
+    --mesh-grading -2
   ;;
 
 SurfaceStage)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Meshing benchmark: both backends (lattice with snapped boundary nodes, CGAL Mesh_3) on the
+# Meshing benchmark: the backends (lattice with snapped boundary nodes, uniform and graded; CGAL Mesh_3) on the
 # built-in full brain's preoperative labels at 1.5, 2, 3, 4, 5 and 6 mm: wall time, nodes,
 # tetrahedra, dihedral angles and each tissue's volume error against its voxels.
 #
@@ -20,7 +20,7 @@ require_brainshift
 prepare_output machine.txt mesh_benchmark.csv summary.md mesh_time_quality.png
 write_machine_description
 
-run "$brainshift" bench mesh --size full --resolutions 6,5,4,3,2,1.5 --backends lattice,cgal --output-dir "$out"
+run "$brainshift" bench mesh --size full --resolutions 6,5,4,3,2,1.5 --backends lattice,graded,cgal --output-dir "$out"
 [ -f "$out/mesh_benchmark.csv" ] || die "$out/mesh_benchmark.csv missing: brainshift bench mesh did not write it"
 
 run "$python" "$here/report.py" "$out"

@@ -30,6 +30,7 @@ STAGES = ["rigid", "classify", "mesh", "surface", "simulate", "warp"]
 DEFAULT_MESH_MM = 4.0
 DEFAULT_SOLVER_RTOL = 1e-5
 DEFAULT_SURFACE_ITERATIONS = 200
+DEFAULT_MESH_GRADING = 0.0  # uniform lattice
 # elastix.py's rows: chart style and names.
 ELASTIX = {
     "elastix rigid": {"color": "tab:green", "marker": "s", "label": "elastix 5 rigid", "name": "elastix rigid"},
@@ -52,6 +53,12 @@ def default_rigid(r):
     return (sampling is None or close(sampling, 1.0)) and (levels is None or close(levels, 3))
 
 
+def mesh_grading(r):
+    """The row's mesh grading; older files have no such column (uniform)."""
+    grading = number(r.get("mesh_grading"))
+    return 0.0 if grading is None else grading
+
+
 def default_setting(rows):
     """The case's brainshift row at BrainShift's default setting; else its only brainshift row (the
     variants of an older run, at another setting); else the default mesh and iterations at the
@@ -59,7 +66,8 @@ def default_setting(rows):
     candidates = [r for r in rows if r["method"] == "brainshift" and default_rigid(r)]
     for r in candidates:
         if (close(number(r["mesh_resolution_mm"]), DEFAULT_MESH_MM) and close(number(r["solver_rtol"]), DEFAULT_SOLVER_RTOL)
-                and close(number(r["surface_iterations"]), DEFAULT_SURFACE_ITERATIONS)):
+                and close(number(r["surface_iterations"]), DEFAULT_SURFACE_ITERATIONS)
+                and abs(mesh_grading(r) - DEFAULT_MESH_GRADING) < 1e-9):
             return r
     if len(candidates) == 1:
         return candidates[0]
@@ -72,7 +80,8 @@ def setting_text(r):
     mesh, rtol, iterations = number(r["mesh_resolution_mm"]), number(r["solver_rtol"]), r["surface_iterations"]
     rigid = [] if default_rigid(r) else [f"rigid {number(r['rigid_sampling']):g} of the samples, "
                                          f"{int(number(r['rigid_levels']))} levels"]
-    return ", ".join(([f"{mesh:g} mm"] if mesh is not None else []) + ([f"rtol {rtol:.0e}"] if rtol is not None else [])
+    graded = [f"graded {mesh_grading(r):g}"] if mesh is not None and mesh_grading(r) > 0 else []
+    return ", ".join(([f"{mesh:g} mm"] if mesh is not None else []) + graded + ([f"rtol {rtol:.0e}"] if rtol is not None else [])
                      + ([f"{iterations} it."] if iterations else []) + rigid)
 
 
@@ -313,11 +322,11 @@ def main():
 
     columns = ["case", "method", "mesh (mm)", "rtol", "surface it.", "equations", "total (s)", "rigid", "classify", "mesh",
                "surface", "simulate", "solve", "warp", "TRE mean", "p95", "max", "craniotomy", "near cavity", "brain",
-               "folded voxels", "rigid samples", "rigid levels"]
+               "folded voxels", "rigid samples", "rigid levels", "mesh grading"]
     keys = ["case", "method", "mesh_resolution_mm", "solver_rtol", "surface_iterations", "equations", "total_seconds",
             "rigid_seconds", "classify_seconds", "mesh_seconds", "surface_seconds", "simulate_seconds",
             "simulate_solve_seconds", "warp_seconds", "tre_mean_mm", "tre_p95_mm", "tre_max_mm", "tre_craniotomy_mm",
-            "tre_near_cavity_mm", "tre_brain_mm", "folded_voxels", "rigid_sampling", "rigid_levels"]
+            "tre_near_cavity_mm", "tre_brain_mm", "folded_voxels", "rigid_sampling", "rigid_levels", "mesh_grading"]
 
     def cell(key, value):
         if value in ("", None):

@@ -25,10 +25,13 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(shipped.meshResolutionMm, defaults.meshResolutionMm, 0);
     BS_CHECK_NEAR(shipped.rigidSamplingFraction, defaults.rigidSamplingFraction, 0);
     BS_CHECK(shipped.rigidLevels == defaults.rigidLevels && defaults.rigidLevels == 3);
+    BS_CHECK_NEAR(shipped.meshGrading, defaults.meshGrading, 0);
+    BS_CHECK(shipped.meshCoarseningLevels == defaults.meshCoarseningLevels);
 
     const fs::path file = folder / "config.json";
     writeTextFileAtomically(file, R"({"materials": {"4": {"youngs_modulus_pa": 20000}},
-                                      "mesh": {"resolution_mm": 2.5, "labels": [2, 3]},
+                                      "mesh": {"resolution_mm": 2.5, "labels": [2, 3], "grading": 1.5, "coarsening_levels": 3,
+                                               "region_of_interest": {"center_lps": [10, -20, 30.5], "radius_mm": 12}},
                                       "solver": {"options": "-ksp_type gmres -pc_type bjacobi"},
                                       "rigid": {"sampling": 0.5, "levels": 2}})");
     const Configuration c = Configuration::load(file);
@@ -37,6 +40,10 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(c.materials.at(2).youngsModulusPa, 3000.0, 0);
     BS_CHECK_NEAR(c.meshResolutionMm, 2.5, 0);
     BS_CHECK((c.meshLabels == std::vector<int>{2, 3}));
+    BS_CHECK_NEAR(c.meshGrading, 1.5, 0);
+    BS_CHECK(c.meshCoarseningLevels == 3);
+    BS_CHECK_NEAR(c.meshRegionOfInterestCenterLps[2], 30.5, 0);
+    BS_CHECK_NEAR(c.meshRegionOfInterestRadiusMm, 12.0, 0);
     BS_CHECK(c.solverOptions == "-ksp_type gmres -pc_type bjacobi");
     BS_CHECK_NEAR(c.rigidSamplingFraction, 0.5, 0);
     BS_CHECK(c.rigidLevels == 2);
@@ -53,6 +60,10 @@ int ConfigurationTest(int, char*[])
     refused(R"({"mesh": {"resolution_mm": 0.01}})", "mesh resolution");
     refused(R"({"mesh": {"labels": []}})", "empty");
     refused(R"({"meshes": {}})", "unknown key \"meshes\"");
+    refused(R"({"mesh": {"grading": -1}})", "mesh grading");
+    refused(R"({"mesh": {"coarsening_levels": 9}})", "coarsening levels");
+    refused(R"({"mesh": {"region_of_interest": {"center_lps": [1, 2], "radius_mm": 5}}})", "center_lps");
+    refused(R"({"mesh": {"region_of_interest": {"center_lps": [1, 2, 3]}}})", "radius_mm");
     refused(R"({"rigid": {"levels": 4}})", "rigid levels");
     refused(R"({"rigid": {"sampling": 0}})", "rigid sampling");
     refused(R"({"rigid": {"pyramid": 2}})", "unknown key \"pyramid\"");

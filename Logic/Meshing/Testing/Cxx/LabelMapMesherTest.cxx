@@ -12,8 +12,11 @@
 #include <vtkIdList.h>
 #include <vtkPointData.h>
 
+#include <array>
+#include <cmath>
 #include <iostream>
 #include <map>
+#include <set>
 
 namespace {
 using namespace brainshift;
@@ -114,6 +117,107 @@ int LabelMapMesherTest(int, char*[])
         mesh.mesh->GetPoint(vtkIdType(ids->GetComponent(p, 0)), b);
         BS_CHECK(a[0] == b[0] && a[1] == b[1] && a[2] == b[2]);
       }
+    }
+
+    // Graded: fine at every tissue interface and the outer surface, coarser inside. The same
+    // guarantees as the uniform lattice, with fewer nodes, and no hanging node.
+    for (double h : {1.5, 2.0}) {
+      MeshingParameters uniform;
+      uniform.resolutionMm = h;
+      MeshingParameters graded = uniform;
+      graded.gradingRate = 1.0;
+      const LabelMapMesh u = meshLabelMap(*labels, uniform);
+      const LabelMapMesh g = meshLabelMap(*labels, graded);
+      const MeshQuality& q = g.quality;
+      std::cout << "graded " << h << " mm: " << q.nodes << " nodes (uniform " << u.quality.nodes << "), dihedral "
+                << q.minimumDihedralDegrees << " to " << q.maximumDihedralDegrees << " degrees;";
+      for (const auto& [l, ml] : q.meshVolumeMl) std::cout << " tissue " << l << " " << ml << " ml of " << q.voxelVolumeMl.at(l);
+      std::cout << '\n';
+      // A small phantom, mostly interface: 26 % fewer nodes at 1.5 mm, 18 % at 2 mm.
+      BS_CHECK_MSG(double(q.nodes) < (h < 2 ? 0.8 : 0.9) * double(u.quality.nodes), q.nodes << " nodes against " << u.quality.nodes);
+      BS_CHECK(q.invertedOrFlat == 0);
+      BS_CHECK_MSG(q.minimumDihedralDegrees >= 10.0, q.minimumDihedralDegrees);
+      BS_CHECK((q.meshVolumeMl.size() == 3));
+      // The bisected lattice's cubes alternate their diagonals; the 3-voxel ventricle slab then
+      // loses 5 % at 2 mm (0.5 % on the uniform lattice), within 3 % at 1.5 mm.
+      for (int tissue : {2, 3, 4}) {
+        if (h > 1.5 && tissue != 2) continue;
+        const double ratio = q.meshVolumeMl.at(tissue) / q.voxelVolumeMl.at(tissue);
+        BS_CHECK_MSG(std::abs(ratio - 1) <= 0.03, "graded: tissue " << tissue << " volume off by " << ratio - 1 << " at " << h << " mm");
+      }
+      BS_CHECK(checkSurface(boundarySurface(g.mesh, {2, 3, 4})).closed);
+      for (int tissue : {2, 3, 4}) BS_CHECK_MSG(checkSurface(boundarySurface(g.mesh, {tissue})).closed, "graded: tissue " << tissue);
+    }
+    {
+      // No node inside another element's edge (a hanging node would leave the surfaces closed
+      // but the mesh torn): checked on the unsnapped lattice, where positions are exact.
+      MeshingParameters graded;
+      graded.resolutionMm = 2.0;
+      graded.gradingRate = 1.0;
+      graded.snapToBoundaries = false;
+      const LabelMapMesh g = meshLabelMap(*labels, graded);
+      std::set<std::array<long long, 3>> nodes;
+      auto key = [](const double x[3]) {
+        return std::array<long long, 3>{std::llround(x[0] * 1e4), std::llround(x[1] * 1e4), std::llround(x[2] * 1e4)};
+      };
+      for (vtkIdType v = 0; v < g.mesh->GetNumberOfPoints(); ++v) nodes.insert(key(g.mesh->GetPoint(v)));
+      std::size_t hanging = 0;
+      vtkNew<vtkIdList> ids;
+      for (vtkIdType c = 0; c < g.mesh->GetNumberOfCells(); ++c) {
+        g.mesh->GetCellPoints(c, ids);
+        for (int a = 0; a < 4; ++a) {
+          for (int b = a + 1; b < 4; ++b) {
+            double p[3], q[3], m[3];
+            g.mesh->GetPoint(ids->GetId(a), p);
+            g.mesh->GetPoint(ids->GetId(b), q);
+            for (int d = 0; d < 3; ++d) m[d] = 0.5 * (p[d] + q[d]);
+            hanging += nodes.count(key(m));
+          }
+        }
+      }
+      BS_CHECK_MSG(hanging == 0, hanging << " element edges hold a node at their midpoint");
+    }
+    {
+      // A region of interest deep in the parenchyma (11 mm from the ventricle, 18 mm from the
+      // surface): coarse without it, at the resolution with it.
+      MeshingParameters graded;
+      graded.resolutionMm = 2.0;
+      graded.gradingRate = 1.0;
+      const std::array<double, 3> centre{40, 40, 28}; // 1 mm voxels at the origin: index = LPS mm
+      auto longestEdgeNear = [&](const LabelMapMesh& m) {
+        double longest = 0;
+        vtkNew<vtkIdList> ids;
+        for (vtkIdType c = 0; c < m.mesh->GetNumberOfCells(); ++c) {
+          m.mesh->GetCellPoints(c, ids);
+          double p[4][3], centroid[3] = {0, 0, 0};
+          for (int v = 0; v < 4; ++v) {
+            m.mesh->GetPoint(ids->GetId(v), p[v]);
+            for (int d = 0; d < 3; ++d) centroid[d] += 0.25 * p[v][d];
+          }
+          double r2 = 0;
+          for (int d = 0; d < 3; ++d) r2 += (centroid[d] - centre[std::size_t(d)]) * (centroid[d] - centre[std::size_t(d)]);
+          if (r2 > 16.0) continue;
+          for (int a = 0; a < 4; ++a) {
+            for (int b = a + 1; b < 4; ++b) {
+              double e2 = 0;
+              for (int d = 0; d < 3; ++d) e2 += (p[a][d] - p[b][d]) * (p[a][d] - p[b][d]);
+              longest = std::max(longest, std::sqrt(e2));
+            }
+          }
+        }
+        return longest;
+      };
+      const double without = longestEdgeNear(meshLabelMap(*labels, graded));
+      graded.regionOfInterest = MeshingParameters::Sphere{centre, 5.0};
+      const double with = longestEdgeNear(meshLabelMap(*labels, graded));
+      std::cout << "region of interest: longest edge " << with << " mm (" << without << " mm without)\n";
+      BS_CHECK_MSG(without > 2.0 * std::sqrt(3.0) + 0.1, without);
+      BS_CHECK_MSG(with <= 2.0 * std::sqrt(3.0) + 1e-6, with);
+      graded.regionOfInterest->radiusMm = -1;
+      BS_CHECK_THROWS(meshLabelMap(*labels, graded), InputError, "positive radius");
+      graded.regionOfInterest.reset();
+      graded.gradingRate = -0.5;
+      BS_CHECK_THROWS(meshLabelMap(*labels, graded), InputError, "mesh grading -0.5");
     }
 
     // A detached fragment of parenchyma (a 6 mm cube in a corner) is not part of the model: no
