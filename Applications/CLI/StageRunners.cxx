@@ -23,6 +23,7 @@
 #include "VolumeIO.h"
 
 #include <cstdio>
+#include <future>
 #include <numeric>
 #include <optional>
 
@@ -422,19 +423,27 @@ void runWarpStage(RunContext& context)
   const double warpSeconds = warpClock.seconds();
 
   // Files: the field, the transform, the warped volumes; then the scene that points at them.
+  // The compressed volumes are written on a second thread while this one writes the field and the
+  // transform (HDF5, which is not thread-safe, stays on this thread alone).
   Stopwatch writeClock;
-  writeDisplacementField(deformation.field, context.output("displacement_intraop_to_preop.nrrd"));
-  auto composite = itk::CompositeTransform<double, 3>::New();
-  composite->AddTransform(makeDisplacementFieldTransform(deformation.field));
-  writeTransform(composite, context.output("intraop_to_preop.h5"));
   std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
     {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
-  writeScalarVolume(warpedImage, context.output("warped_preop_image.nii.gz"));
-  writeLabelVolume(warpedLabels, context.output("warped_preop_labels.nii.gz"));
-  for (const auto& [name, image] : warpedOverlays) {
-    scalars.emplace_back("warped " + name, context.output("warped_" + name + ".nii.gz"), image);
-    writeScalarVolume(image, context.output("warped_" + name + ".nii.gz"));
+  for (const auto& [name, image] : warpedOverlays) scalars.emplace_back("warped " + name, context.output("warped_" + name + ".nii.gz"), image);
+  const fs::path warpedLabelsFile = context.output("warped_preop_labels.nii.gz");
+  std::future<void> volumesWritten = std::async(std::launch::async, [&scalars, &warpedLabels, &warpedLabelsFile] {
+    for (const auto& [name, file, image] : scalars) writeScalarVolume(image, file);
+    writeLabelVolume(warpedLabels, warpedLabelsFile);
+  });
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  try {
+    writeDisplacementField(deformation.field, context.output("displacement_intraop_to_preop.nrrd"));
+    composite->AddTransform(makeDisplacementFieldTransform(deformation.field));
+    writeTransform(composite, context.output("intraop_to_preop.h5"));
+  } catch (...) {
+    volumesWritten.wait(); // the thread's references must outlive it
+    throw;
   }
+  volumesWritten.get();
   vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
   if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   writeUpdateScene(context, scalars, context.output("warped_preop_labels.nii.gz"), warpedLabels, rigid,

