@@ -104,6 +104,7 @@ write_machine_description() {
     echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
     echo "uname: $(uname -a)"
     echo "nproc: $(nproc)"
+    echo "load average at start: $(cut -d' ' -f1-3 /proc/loadavg) (1, 5, 15 min; other work on the machine slows the timings)"
     echo "cpu: $(lscpu | grep 'Model name' | sed 's/^Model name:[[:space:]]*//')"
     echo "memory:"
     free -h
