@@ -1,6 +1,8 @@
 #pragma once
-// The three ways a BrainShift operation can fail; the command line maps them to exit codes
-// (../shared/CONTRACT.md): bad input 2, a failure of the method 1.
+// The ways a BrainShift operation can fail; the command line maps them to exit codes
+// (../shared/CONTRACT.md): bad input 2, a failure of the method 1. A cancelled operation (the
+// host's Cancel) is neither.
+#include <atomic>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -26,6 +28,22 @@ class NotAvailableError : public MethodError {
 public:
   using MethodError::MethodError;
 };
+
+/// The caller asked the operation to stop (a Cancel in the host); nothing was produced.
+class CancelledError : public std::runtime_error {
+public:
+  using std::runtime_error::runtime_error;
+};
+
+/// A cancellation request shared with long operations: they poll it at safe points and throw
+/// CancelledError naming what stopped. Null: not cancellable.
+using CancelFlag = const std::atomic<bool>*;
+
+/// Throws CancelledError("<what> cancelled") when `flag` is set.
+inline void throwIfCancelled(CancelFlag flag, const char* what)
+{
+  if (flag && flag->load(std::memory_order_relaxed)) throw CancelledError(std::string(what) + " cancelled");
+}
 
 /// Non-fatal findings collected while reading or computing (they end up in report.json).
 using Warnings = std::vector<std::string>;

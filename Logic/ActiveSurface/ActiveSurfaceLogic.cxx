@@ -527,6 +527,7 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
   computeForces();
   std::vector<double> recentMean;
   for (out.iterations = 1; out.iterations <= p.maximumIterations; ++out.iterations) {
+    throwIfCancelled(p.cancel, "the active surface");
     const Eigen::MatrixXd next = membrane.solve(v + p.timeStep * force);
     const Eigen::VectorXd moves = (next - v).rowwise().norm();
     v = next;

@@ -45,6 +45,7 @@
 namespace brainshift {
 
 struct ActiveSurfaceParameters {
+  CancelFlag cancel = nullptr;       ///< polled at every iteration: CancelledError when set
   double membraneWeight = 1.0;       ///< alpha: resistance to stretching of the displacement
   double bendingWeight = 0.2;        ///< beta: resistance to bending (alpha^2 >= 4 beta / tau: fast path)
   double timeStep = 1.0;             ///< tau of the semi-implicit step

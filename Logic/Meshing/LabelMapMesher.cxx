@@ -386,6 +386,7 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
     return s > h + parameters.gradingRate * clearance + 1e-9;
   };
   const KuhnLattice lattice = buildGradedKuhnLattice(cells, graded ? parameters.coarseningLevels : 0, wantsFiner);
+  throwIfCancelled(parameters.cancel, "meshing");
 
   auto tissueAt = [&](const double c[3]) -> int {
     long idx[3];
@@ -405,7 +406,9 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
     const int tissue = tissueAt(centroid);
     if (chosen.count(tissue)) tissueOf[t] = tissue;
   }
+  throwIfCancelled(parameters.cancel, "meshing");
   const std::size_t repaired = repairNonManifoldEdges(lattice, tissueOf, chosen, warnings);
+  throwIfCancelled(parameters.cancel, "meshing");
   if (repaired > 0) {
     warnings.push_back("mesh: " + std::to_string(repaired) +
                        " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
@@ -569,6 +572,7 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
   TetrahedralMeshArrays arrays = parameters.backend == MeshingBackend::Cgal
                                      ? meshLabelMapWithCgal(image, parameters)
                                      : latticeMesh(image, parameters, chosen, lo, hi, result.warnings);
+  throwIfCancelled(parameters.cancel, "meshing");
   keepLargestFaceConnectedPart(arrays, result.warnings);
   result.mesh = toUnstructuredGrid(arrays);
   result.quality = measureMeshQuality(result.mesh, &image);

@@ -51,6 +51,7 @@ struct MeshingParameters {
     double radiusMm = 0;
   };
   std::optional<Sphere> regionOfInterest; ///< meshed at resolutionMm throughout
+  CancelFlag cancel = nullptr;            ///< polled between the phases: CancelledError when set
   void validate(const LabelImage& labels) const;
 };
 

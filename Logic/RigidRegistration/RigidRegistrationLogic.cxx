@@ -4,6 +4,7 @@
 #include "IntensityStatistics.h"
 
 #include <itkBinShrinkImageFilter.h>
+#include <itkCommand.h>
 #include <itkEuler3DTransform.h>
 #include <itkImageMaskSpatialObject.h>
 #include <itkLinearInterpolateImageFunction.h>
@@ -180,7 +181,7 @@ LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points
   return level;
 }
 
-unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iterations)
+unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iterations, CancelFlag cancel)
 {
   auto scales = ScalesEstimator::New();
   scales->SetMetric(metric);
@@ -196,7 +197,18 @@ unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iter
   optimizer->SetGradientMagnitudeTolerance(1e-8);
   optimizer->SetNumberOfIterations(iterations);
   optimizer->SetReturnBestParametersAndValue(true);
+  if (cancel) { // stop at the next iteration; the caller then throws
+    auto observer = itk::CStyleCommand::New();
+    observer->SetClientData(const_cast<std::atomic<bool>*>(cancel));
+    observer->SetConstCallback([](const itk::Object* caller, const itk::EventObject&, void* flag) {
+      if (static_cast<std::atomic<bool>*>(flag)->load()) {
+        const_cast<Optimizer*>(static_cast<const Optimizer*>(caller))->StopOptimization();
+      }
+    });
+    optimizer->AddObserver(itk::IterationEvent(), observer);
+  }
   optimizer->StartOptimization();
+  throwIfCancelled(cancel, "rigid registration");
   return optimizer->GetCurrentIteration();
 }
 
@@ -345,6 +357,7 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
   }
 
   for (std::size_t level = 0; level < levels; ++level) {
+    throwIfCancelled(parameters.cancel, "rigid registration");
     PointSet::Pointer points = sampleForeground(*fixedLevels[level], fixedThreshold, parameters.samplesPerLevel[level],
                                                 parameters.seed + level);
     LevelMetric metric = makeMetric(fixedLevels[level], movingLevels[level], points, mask, transform, parameters.histogramBins);
@@ -359,6 +372,7 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
       std::vector<Start> starts;
       for (double a : parameters.startAnglesDegrees) {
         for (double b : parameters.startAnglesDegrees) {
+          throwIfCancelled(parameters.cancel, "rigid registration");
           for (double c : parameters.startAnglesDegrees) {
             transform->SetParameters(translationOnly);
             setRotationFromEuler(*transform, a, b, c);
@@ -380,7 +394,7 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
         transform->SetParameters(translationOnly);
         setRotationFromEuler(*transform, starts[s].angles[0], starts[s].angles[1], starts[s].angles[2]);
         const unsigned iterations = optimize(metric.metric, parameters.stepMmPerLevel[0], parameters.minimumStepMmPerLevel[0],
-                                             parameters.iterationsPerLevel[0]);
+                                             parameters.iterationsPerLevel[0], parameters.cancel);
         const double value = metric.metric->GetValue();
         if (value < bestValue) {
           bestValue = value;
@@ -394,7 +408,7 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
     } else {
       result.iterationsPerLevel.push_back(optimize(metric.metric, parameters.stepMmPerLevel[level],
                                                    parameters.minimumStepMmPerLevel[level],
-                                                   parameters.iterationsPerLevel[level]));
+                                                   parameters.iterationsPerLevel[level], parameters.cancel));
     }
 
     if (level + 1 == levels) {

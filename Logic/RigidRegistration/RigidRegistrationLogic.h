@@ -32,6 +32,8 @@ struct RigidRegistrationParameters {
   /// The preoperative labels (head and brain, dilated by this much) limit the metric.
   double maskDilationMm = 8.0;
   std::uint64_t seed = 2000;
+  /// Polled at every optimizer iteration and start: CancelledError when set.
+  CancelFlag cancel = nullptr;
   /// A known start (for example the previous scan's result): used instead of the multi-start.
   SpatialTransform::ConstPointer initialIntraopToPreop;
 

@@ -562,6 +562,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   result.featureSeconds = secondsSince(start);
 
   // Exact k-NN (kd-tree), voxels with bit-identical features answered once.
+  throwIfCancelled(P.cancel, "tissue classification");
   const auto knnStart = Clock::now();
   KdTree tree(D, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(12));
   tree.buildIndex();
@@ -579,6 +580,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     std::map<LabelPixel, unsigned> tally;
     std::size_t queries = 0;
     for (std::size_t i = begin; i < end; ++i) {
+      if ((i & 0xffff) == 0 && P.cancel && P.cancel->load(std::memory_order_relaxed)) break; // thrown below
       const float* f = &features[i * D];
       const std::uint64_t hash = AnswerCache::hashOf(f, D);
       const int known = cache.find(i, hash);
@@ -606,10 +608,12 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     }
     queriesPerThread[thread] = queries;
   });
+  throwIfCancelled(P.cancel, "tissue classification");
   for (std::size_t q : queriesPerThread) result.knnQueries += q;
   result.knnSeconds = secondsSince(knnStart);
 
   // Clean-up of the brain.
+  throwIfCancelled(P.cancel, "tissue classification");
   const auto cleanupStart = Clock::now();
   auto isBrain = [](LabelPixel l) { return l == Parenchyma || l == Ventricles || l == Tumour; };
   if (present.count(Ventricles)) {

@@ -29,6 +29,8 @@ struct TissuePrototype {
 };
 
 struct TissueClassificationParameters {
+  /// Polled between the phases and every 65,536 voxels of the k-NN: CancelledError when set.
+  CancelFlag cancel = nullptr;
   unsigned k = 7;
   double saturationMm = 10.0;          ///< spatial channels: distance to each tissue, capped here
   double intensityWeight = 1.0;        ///< intensity channel, scaled to 0..100 over the head

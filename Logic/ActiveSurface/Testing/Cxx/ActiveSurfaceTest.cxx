@@ -17,6 +17,7 @@
 #include <vtkPointData.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <iostream>
 
@@ -300,6 +301,21 @@ void badInput()
                                          (it.GetIndex()[0] - 48) * (it.GetIndex()[0] - 48) + (it.GetIndex()[1] - 32) * (it.GetIndex()[1] - 32) +
                                            (it.GetIndex()[2] - 32) * (it.GetIndex()[2] - 32) < 100 ? 2 : 0);
   BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *disjoint, nullptr, *identity, parameters, names), InputError, "disjoint");
+
+  // Cancelled (the host's Cancel): CancelledError, no surface.
+  {
+    std::atomic<bool> cancel{true};
+    ActiveSurfaceParameters cancelled = parameters;
+    cancelled.cancel = &cancel;
+    auto brain = brainshift::testing::makeImage<LabelImage>(preopGrid());
+    itk::ImageRegionIteratorWithIndex<LabelImage> b(brain, brain->GetLargestPossibleRegion());
+    for (; !b.IsAtEnd(); ++b) {
+      const auto i = b.GetIndex();
+      b.Set((i[0] - 32) * (i[0] - 32) + (i[1] - 32) * (i[1] - 32) + (i[2] - 32) * (i[2] - 32) < 400 ? 2 : 0);
+    }
+    BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *brain, nullptr, *identity, cancelled, names), CancelledError,
+                    "the active surface cancelled");
+  }
 
   // The surface far from the intraoperative image.
   auto far = itk::Euler3DTransform<double>::New();

@@ -13,6 +13,7 @@
 #include <vtkPointData.h>
 
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <iostream>
 #include <map>
@@ -260,6 +261,14 @@ int LabelMapMesherTest(int, char*[])
               << brainMesh.quality.tetrahedra << " tetrahedra\n";
     BS_CHECK(brainMesh.quality.invertedOrFlat == 0);
     BS_CHECK(checkSurface(boundarySurface(brainMesh.mesh, {2, 3, 4})).closed);
+
+    // Cancelled (the host's Cancel): CancelledError, no mesh.
+    {
+      std::atomic<bool> cancel{true};
+      MeshingParameters cancelled;
+      cancelled.cancel = &cancel;
+      BS_CHECK_THROWS(meshLabelMap(*labels, cancelled), CancelledError, "meshing cancelled");
+    }
 
     // Bad input.
     MeshingParameters parameters;

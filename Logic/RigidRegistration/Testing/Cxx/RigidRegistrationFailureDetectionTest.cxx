@@ -7,7 +7,10 @@
 
 #include <itkImageRegionIteratorWithIndex.h>
 
+#include <atomic>
+#include <chrono>
 #include <iostream>
+#include <thread>
 
 namespace {
 using namespace brainshift;
@@ -72,5 +75,26 @@ int RigidRegistrationFailureDetectionTest(int, char*[])
     RigidRegistrationParameters inconsistent;
     inconsistent.samplesPerLevel = {1000, 1000};
     BS_CHECK_THROWS(registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, inconsistent), InputError, "per-level");
+
+    // Cancel: asked before the start, and during the run (from another thread, as the host's
+    // Cancel button does): CancelledError, not a result.
+    std::atomic<bool> cancel{true};
+    RigidRegistrationParameters cancelled;
+    cancelled.cancel = &cancel;
+    BS_CHECK_THROWS(registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, cancelled), CancelledError,
+                    "rigid registration cancelled");
+    cancel = false;
+    std::thread canceller([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(30));
+      cancel = true;
+    });
+    bool stopped = false;
+    try {
+      registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, cancelled);
+    } catch (const CancelledError&) {
+      stopped = true;
+    }
+    canceller.join();
+    BS_CHECK_MSG(stopped, "a registration cancelled 30 ms after its start ran to its end");
   });
 }

@@ -7,6 +7,8 @@
 #include "MarkupsIO.h"
 #include "TissueClassificationTestSupport.h"
 
+#include <atomic>
+
 int TissueClassificationBadInputTest(int, char*[])
 {
   return brainshift::testing::runTest("TissueClassificationBadInputTest", [] {
@@ -27,6 +29,13 @@ int TissueClassificationBadInputTest(int, char*[])
       copy->GetBufferPointer()[i] = l == 2 ? 1 : l;
     }
     BS_CHECK_THROWS(classifyTissues(intraop, *copy, *c.rigid, std::nullopt, parameters), InputError, "no parenchyma");
+
+    // Cancelled (the host's Cancel): CancelledError, no labels.
+    std::atomic<bool> cancel{true};
+    TissueClassificationParameters cancelled = parameters;
+    cancelled.cancel = &cancel;
+    BS_CHECK_THROWS(classifyTissues(intraop, *c.simulated.preopLabels, *c.rigid, std::nullopt, cancelled), CancelledError,
+                    "tissue classification cancelled");
 
     // A prototype outside the image names itself.
     std::vector<TissuePrototype> prototypes = automatic.prototypes;
