@@ -293,6 +293,7 @@ FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteEle
 
 struct FiniteElementSession::Impl {
   FiniteElementRunOptions options;
+  FiniteElementJob prepared;  ///< the job the worker was prepared with
   FiniteElementJob fixedPart; ///< the fixed nodes (values replaced per solve)
   TemporaryFolder folder;
   std::unique_ptr<WorkerProcess> worker;
@@ -310,6 +311,7 @@ FiniteElementSession::FiniteElementSession(const FiniteElementJob& job, FiniteEl
   const fs::path jobFile = impl_->folder.path / "job.bsfe";
   writeFiniteElementJob(job, jobFile);
   impl_->fixedPart.fixedNodes = job.fixedNodes;
+  impl_->prepared = job;
   impl_->worker = std::make_unique<WorkerProcess>(impl_->options, std::vector<std::string>{"--serve", jobFile.string()});
   const auto answer = impl_->worker->readLine(impl_->options.timeoutSeconds);
   if (!answer || *answer != "ready") {
@@ -327,6 +329,30 @@ FiniteElementSession::~FiniteElementSession()
       impl_->worker->readLine(impl_->options.cancelGraceSeconds);
     } catch (const std::exception&) {
     }
+  }
+}
+
+const FiniteElementJob& FiniteElementSession::preparedJob() const { return impl_->prepared; }
+
+FiniteElementResult FiniteElementSession::solve(const std::vector<std::int32_t>& fixedNodes,
+                                                const std::vector<double>& fixedDisplacements)
+{
+  if (fixedNodes.empty()) throw std::invalid_argument("a solve needs at least one fixed node");
+  const std::size_t nodes = impl_->prepared.nodeCount();
+  std::vector<char> seen(nodes, 0);
+  for (std::int32_t node : fixedNodes) {
+    if (node < 0 || std::size_t(node) >= nodes) {
+      throw std::invalid_argument("fixed node " + std::to_string(node) + " is not a node of the prepared mesh");
+    }
+    if (seen[std::size_t(node)]++) throw std::invalid_argument("fixed node " + std::to_string(node) + " is given twice");
+  }
+  const std::vector<std::int32_t> before = impl_->fixedPart.fixedNodes;
+  impl_->fixedPart.fixedNodes = fixedNodes;
+  try {
+    return solve(fixedDisplacements);
+  } catch (const std::invalid_argument&) {
+    impl_->fixedPart.fixedNodes = before; // nothing reached the worker
+    throw;
   }
 }
 

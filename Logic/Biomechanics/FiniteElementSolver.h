@@ -49,6 +49,12 @@ public:
   /// One solve; `fixedDisplacements` has 3 values per fixed node of the job, in its order.
   /// MethodError when the solve fails (the session stays usable) or the worker has died.
   FiniteElementResult solve(const std::vector<double>& fixedDisplacements);
+  /// One solve with other fixed nodes of the same mesh (a later scan frees or imposes other
+  /// surface nodes): the worker eliminates them anew and sets its preconditioner up again, keeping
+  /// the partition and the assembled matrix. Later solves are for these nodes.
+  FiniteElementResult solve(const std::vector<std::int32_t>& fixedNodes, const std::vector<double>& fixedDisplacements);
+  /// The job the worker was prepared with (mesh, materials, options), to check a later job against.
+  const FiniteElementJob& preparedJob() const;
 
 private:
   struct Impl;

@@ -284,14 +284,7 @@ public:
     check(MatDuplicate(A_, MAT_COPY_VALUES, &assembled_), "MatDuplicate");
 
     // -- Eliminate the fixed dofs, keeping A symmetric.
-    for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-      const PetscInt node = numbering_.newOfOld[std::size_t(job.fixedNodes[f])];
-      if (!mine(node)) continue;
-      for (int d = 0; d < 3; ++d) fixedRows_.push_back({3 * node + d, 3 * f + std::size_t(d)});
-    }
-    std::vector<PetscInt> rows;
-    for (const auto& r : fixedRows_) rows.push_back(r.first);
-    check(MatZeroRowsColumns(A_, PetscInt(rows.size()), rows.data(), 1.0, nullptr, nullptr), "MatZeroRowsColumns");
+    eliminate(job.fixedNodes);
 
     // Rigid body modes for the multigrid (coordinates in the new numbering).
     Vec coordinates;
@@ -365,6 +358,23 @@ public:
     MatDestroy(&A_);
   }
 
+  /// Another set of fixed nodes on the same mesh (a later scan imposes other nodes): the
+  /// elimination is redone from the assembled matrix, and the preconditioner (or factorisation) set
+  /// up again; partition, preallocation and assembly are kept.
+  void refix(const std::vector<std::int32_t>& fixedNodes)
+  {
+    const double clock = MPI_Wtime();
+    check(MatCopy(assembled_, A_, SAME_NONZERO_PATTERN), "MatCopy");
+    eliminate(fixedNodes);
+    check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
+    check(KSPSetUp(ksp_), "KSPSetUp");
+    check(KSPSetUpOnBlocks(ksp_), "KSPSetUpOnBlocks");
+    fixedNodes_ = fixedNodes;
+    result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
+  }
+
+  const std::vector<std::int32_t>& fixedNodes() const { return fixedNodes_; }
+
   /// Solves for one set of imposed values (3 per fixed node, in the job's order).
   FiniteElementResult solveFor(const std::vector<double>& values)
   {
@@ -436,6 +446,21 @@ public:
 private:
   bool mine(PetscInt newNode) const { return newNode >= first_ && newNode < first_ + owned_; }
 
+  /// Zeroes the rows and columns of the fixed dofs of A (1 on the diagonal), keeping it symmetric.
+  void eliminate(const std::vector<std::int32_t>& fixedNodes)
+  {
+    fixedRows_.clear();
+    for (std::size_t f = 0; f < fixedNodes.size(); ++f) {
+      const PetscInt node = numbering_.newOfOld[std::size_t(fixedNodes[f])];
+      if (!mine(node)) continue;
+      for (int d = 0; d < 3; ++d) fixedRows_.push_back({3 * node + d, 3 * f + std::size_t(d)});
+    }
+    std::vector<PetscInt> rows;
+    for (const auto& r : fixedRows_) rows.push_back(r.first);
+    check(MatZeroRowsColumns(A_, PetscInt(rows.size()), rows.data(), 1.0, nullptr, nullptr), "MatZeroRowsColumns");
+    fixedNodes_ = fixedNodes;
+  }
+
   const FiniteElementJob& job_;
   int rank_, size_;
   PetscInt n_ = 0, first_ = 0, owned_ = 0;
@@ -445,10 +470,12 @@ private:
   Vec x_ = nullptr, b_ = nullptr;
   KSP ksp_ = nullptr;
   std::vector<std::pair<PetscInt, std::size_t>> fixedRows_; ///< owned fixed dof, index into the values
+  std::vector<std::int32_t> fixedNodes_;
 };
 
-/// Serves solves: "solve VALUES RESULT" (VALUES: the imposed displacements, a job-format file of
-/// the same fixed nodes) and "quit", one per line on standard input; answers "solved" or "failed".
+/// Serves solves: "solve VALUES RESULT" (VALUES: a job-format file of the fixed nodes and their
+/// displacements; other fixed nodes than the last solve's are eliminated anew first) and "quit",
+/// one per line on standard input; answers "solved" or "failed".
 void serve(const FiniteElementJob& job, int rank, int size)
 {
   PreparedProblem problem(job, rank, size, true);
@@ -466,9 +493,15 @@ void serve(const FiniteElementJob& job, int rank, int size)
     if (std::strcmp(command, "solve") != 0) continue;
     try {
       const FiniteElementJob values = readFiniteElementJob(valuesFile);
-      if (values.fixedNodes != job.fixedNodes || values.fixedDisplacements.size() != job.fixedDisplacements.size()) {
-        throw WorkerFailure(2, std::string(valuesFile) + ": not the fixed nodes the worker was prepared for");
+      if (values.fixedDisplacements.size() != 3 * values.fixedNodes.size() || values.fixedNodes.empty()) {
+        throw WorkerFailure(2, std::string(valuesFile) + ": not 3 displacements per fixed node");
       }
+      for (std::int32_t node : values.fixedNodes) {
+        if (node < 0 || std::size_t(node) >= job.nodeCount()) {
+          throw WorkerFailure(2, std::string(valuesFile) + ": fixed node " + std::to_string(node) + " is not a node of the mesh");
+        }
+      }
+      if (values.fixedNodes != problem.fixedNodes()) problem.refix(values.fixedNodes);
       const FiniteElementResult result = problem.solveFor(values.fixedDisplacements);
       if (rank == 0) {
         writeFiniteElementResult(result, resultFile);

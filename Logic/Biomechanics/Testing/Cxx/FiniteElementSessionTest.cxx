@@ -73,6 +73,37 @@ int FiniteElementSessionTest(int, char*[])
       // A malformed request is refused and the session goes on.
       BS_CHECK_THROWS(session.solve({1.0, 2.0}), std::invalid_argument, "3 values per fixed node");
       BS_CHECK(session.solve(job.fixedDisplacements).convergedReason > 0);
+
+      // Other fixed nodes on the same mesh (a later scan frees part of the surface): eliminated
+      // anew in the same worker, the answer that of a fresh one-shot solve; then back again.
+      FiniteElementJob fewer = secondJob;
+      fewer.fixedNodes.clear();
+      fewer.fixedDisplacements.clear();
+      for (std::size_t f = 0; f < secondJob.fixedNodes.size(); ++f) {
+        const double* p = &job.nodes[3 * std::size_t(secondJob.fixedNodes[f])];
+        if (p[2] > 0.999 * side && p[0] < 0.5 * side) continue; // half of the top face left free
+        fewer.fixedNodes.push_back(secondJob.fixedNodes[f]);
+        fewer.fixedDisplacements.insert(fewer.fixedDisplacements.end(), &secondJob.fixedDisplacements[3 * f],
+                                        &secondJob.fixedDisplacements[3 * f] + 3);
+      }
+      BS_CHECK(fewer.fixedNodes.size() < secondJob.fixedNodes.size());
+      const FiniteElementResult refixed = session.solve(fewer.fixedNodes, fewer.fixedDisplacements);
+      const FiniteElementResult fresh = solveWithWorker(fewer, testing::workerOptions(ranks));
+      double refixDifference = 0;
+      for (std::size_t i = 0; i < fresh.displacements.size(); ++i) {
+        refixDifference = std::max(refixDifference, std::abs(refixed.displacements[i] - fresh.displacements[i]));
+      }
+      std::cout << ranks << " ranks: other fixed nodes (" << fewer.fixedNodes.size() << " of " << secondJob.fixedNodes.size()
+                << "), set up again in " << refixed.setupSeconds << " s, difference to one-shot " << refixDifference << " mm\n";
+      BS_CHECK_MSG(refixDifference < 1e-6, refixDifference);
+      const FiniteElementResult back = session.solve(job.fixedNodes, job.fixedDisplacements);
+      double backDifference = 0;
+      for (std::size_t i = 0; i < back.displacements.size(); ++i) {
+        backDifference = std::max(backDifference, std::abs(back.displacements[i] - answers[0].displacements[i]));
+      }
+      BS_CHECK_MSG(backDifference < 1e-9, backDifference);
+      BS_CHECK_THROWS(session.solve({0, 0}, std::vector<double>(6, 0.0)), std::invalid_argument, "given twice");
+      BS_CHECK_THROWS(session.solve({-1}, std::vector<double>(3, 0.0)), std::invalid_argument, "not a node");
     }
 
     // Options that choose the method replace the tuned default (CG + GAMG beneath them); others go over it.
