@@ -1,0 +1,49 @@
+// The host finds the rigid registration module in the modules folder; a file that is not a
+// plugin and a missing folder are reported and the host starts all the same.
+#include "BrainShiftTestingSupport.h"
+#include "HostMainWindow.h"
+
+#include <QApplication>
+#include <QFile>
+#include <QSurfaceFormat>
+
+#include <fstream>
+
+int HostModuleDiscoveryTest(int argc, char* argv[])
+{
+  QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
+  QApplication application(argc, argv);
+  return brainshift::testing::runTest("HostModuleDiscoveryTest", [] {
+    using namespace brainshift;
+    // The build's modules folder ($BRAINSHIFT_MODULES_DIR, set by the test).
+    {
+      HostMainWindow host(defaultModulesFolder());
+      BS_CHECK_MSG(host.moduleFailures().empty(), host.lastMessage().toStdString());
+      BS_CHECK(host.moduleTitles() == QStringList({"Data", "Rigid registration"}));
+    }
+
+    // A folder with the rigid module and a broken one.
+    const auto folder = testing::temporaryFolder("HostModuleDiscoveryTest");
+    BS_CHECK(QFile::copy(BRAINSHIFT_RIGID_MODULE_FILE, QString::fromStdString((folder / "libBrainShiftRigidRegistrationModule.so").string())));
+    std::ofstream(folder / "libBrokenModule.so") << "not a shared object\n";
+    std::ofstream(folder / "README.txt") << "not a library: ignored\n";
+    HostMainWindow host(QString::fromStdString(folder.string()));
+    host.show();
+    BS_CHECK(host.moduleTitles() == QStringList({"Data", "Rigid registration"}));
+    BS_CHECK(host.moduleFailures().size() == 1);
+    BS_CHECK(host.moduleFailures().front().file.endsWith("libBrokenModule.so"));
+    BS_CHECK(!host.moduleFailures().front().reason.isEmpty());
+    BS_CHECK_MSG(host.lastMessage().contains("could not be loaded") && host.lastMessage().contains("libBrokenModule.so"),
+                 host.lastMessage().toStdString());
+    BS_CHECK(host.selectModule("Rigid registration"));
+    QWidget* panel = host.currentPanel();
+    BS_CHECK(panel && panel->findChild<QWidget*>("intraopSelector"));
+    BS_CHECK(!host.selectModule("No such module"));
+    BS_CHECK(host.selectModule("Data") && host.currentPanel() == host.dataPanel());
+
+    // No modules folder at all: reported, the host still has its own panel.
+    HostMainWindow bare(QString::fromStdString((folder / "missing").string()));
+    BS_CHECK(bare.moduleTitles() == QStringList({"Data"}));
+    BS_CHECK(bare.moduleFailures().size() == 1 && bare.lastMessage().contains("does not exist"));
+  });
+}

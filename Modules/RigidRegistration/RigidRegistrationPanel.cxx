@@ -1,0 +1,193 @@
+#include "RigidRegistrationPanel.h"
+
+#include <QCheckBox>
+#include <QElapsedTimer>
+#include <QFormLayout>
+#include <QFutureWatcher>
+#include <QLabel>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QVBoxLayout>
+#include <QtConcurrent/QtConcurrentRun>
+
+#include <optional>
+
+namespace brainshift {
+
+struct RigidRegistrationPanel::Outcome {
+  unsigned run = 0;
+  std::optional<RigidRegistrationResult> result;
+  QString error;
+  double seconds = 0;
+};
+
+RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
+  : QWidget(parent)
+  , scene_(scene)
+{
+  intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
+  intraop_->setObjectName("intraopSelector");
+  preop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
+  preop_->setObjectName("preopSelector");
+  preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
+  preopLabels_->setObjectName("preopLabelsSelector");
+  useLabels_ = new QCheckBox(tr("Limit the metric to the preoperative head (labels)"), this);
+  run_ = new QPushButton(tr("Run"), this);
+  cancel_ = new QPushButton(tr("Cancel"), this);
+  progress_ = new QProgressBar(this);
+  status_ = new QLabel(tr("Idle"), this);
+  status_->setWordWrap(true);
+  status_->setObjectName("status");
+
+  auto* form = new QFormLayout;
+  form->addRow(tr("Intraoperative (fixed)"), intraop_);
+  form->addRow(tr("Preoperative (moving)"), preop_);
+  form->addRow(tr("Preoperative labels"), preopLabels_);
+  form->addRow(useLabels_);
+  auto* buttons = new QHBoxLayout;
+  buttons->addWidget(run_);
+  buttons->addWidget(cancel_);
+  auto* column = new QVBoxLayout(this);
+  column->addLayout(form);
+  column->addLayout(buttons);
+  column->addWidget(progress_);
+  column->addWidget(status_);
+  column->addStretch(1);
+
+  intraop_->setScene(&scene_);
+  preop_->setScene(&scene_);
+  preopLabels_->setScene(&scene_);
+  // The usual case: the intraoperative and preoperative roles pick themselves.
+  for (const auto& volume : scene_.nodesOfType<ScalarVolumeNode>()) {
+    if (volume->role() == "intraop") intraop_->setCurrentNodeId(QString::fromStdString(volume->id()));
+    if (volume->role() == "preop") preop_->setCurrentNodeId(QString::fromStdString(volume->id()));
+  }
+  useLabels_->setChecked(preopLabels_->count() > 0);
+
+  connect(run_, &QPushButton::clicked, this, &RigidRegistrationPanel::run);
+  connect(cancel_, &QPushButton::clicked, this, &RigidRegistrationPanel::cancel);
+  setRunning(false);
+}
+
+RigidRegistrationPanel::~RigidRegistrationPanel()
+{
+  intraop_->setScene(nullptr);
+  preop_->setScene(nullptr);
+  preopLabels_->setScene(nullptr);
+}
+
+QString RigidRegistrationPanel::statusText() const
+{
+  return status_->text();
+}
+
+void RigidRegistrationPanel::setStatus(const QString& text)
+{
+  status_->setText(text);
+}
+
+void RigidRegistrationPanel::setRunning(bool running)
+{
+  running_ = running;
+  run_->setEnabled(!running);
+  cancel_->setEnabled(running);
+  intraop_->setEnabled(!running);
+  preop_->setEnabled(!running);
+  preopLabels_->setEnabled(!running);
+  useLabels_->setEnabled(!running);
+  // No progress hook in the logic: a busy bar while running, empty when idle.
+  progress_->setRange(0, running ? 0 : 1);
+  progress_->setValue(0);
+}
+
+void RigidRegistrationPanel::run()
+{
+  if (running_) return;
+  auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
+  auto preop = std::dynamic_pointer_cast<ScalarVolumeNode>(preop_->currentNode());
+  if (!intraop || !preop || !intraop->image() || !preop->image()) {
+    setStatus(tr("Choose an intraoperative and a preoperative volume first."));
+    return;
+  }
+  if (intraop == preop) {
+    setStatus(tr("The intraoperative and the preoperative volume are the same node."));
+    return;
+  }
+  auto labels = useLabels_->isChecked() ? std::dynamic_pointer_cast<LabelMapVolumeNode>(preopLabels_->currentNode()) : nullptr;
+
+  // The worker holds its own references to the images: the scene may change meanwhile (nodes
+  // replace images rather than edit them in place), and nothing of the scene is touched off
+  // the GUI thread.
+  const unsigned run = ++currentRun_;
+  ScalarImage::ConstPointer fixedImage = intraop->image(), movingImage = preop->image();
+  LabelImage::ConstPointer movingLabels = labels ? labels->image() : nullptr;
+  const RigidRegistrationParameters parameters = parameters_;
+  auto* watcher = new QFutureWatcher<Outcome>(this);
+  connect(watcher, &QFutureWatcher<Outcome>::finished, this, [this, watcher] {
+    const Outcome outcome = watcher->result();
+    watcher->deleteLater();
+    if (outcome.run != currentRun_ || !running_) {
+      emit discardedRunFinished();
+      return;
+    }
+    finish(outcome);
+  });
+  watcher->setFuture(QtConcurrent::run([run, fixedImage, movingImage, movingLabels, parameters]() {
+    Outcome outcome;
+    outcome.run = run;
+    QElapsedTimer clock;
+    clock.start();
+    try {
+      outcome.result = registerRigidly(*fixedImage, *movingImage, movingLabels.GetPointer(), parameters);
+    } catch (const std::exception& e) {
+      outcome.error = QString::fromStdString(e.what());
+    } catch (...) {
+      outcome.error = "an unknown error in the rigid registration";
+    }
+    outcome.seconds = clock.elapsed() / 1000.0;
+    return outcome;
+  }));
+  setRunning(true);
+  setStatus(tr("Registering %1 to %2 ...").arg(QString::fromStdString(intraop->name()), QString::fromStdString(preop->name())));
+}
+
+void RigidRegistrationPanel::cancel()
+{
+  if (!running_) return;
+  ++currentRun_; // the running run's result no longer belongs to any run
+  setRunning(false);
+  setStatus(tr("Cancelled; the registration still running in the background will be discarded."));
+}
+
+void RigidRegistrationPanel::finish(const Outcome& outcome)
+{
+  setRunning(false);
+  if (!outcome.error.isEmpty()) {
+    setStatus(tr("Rigid registration failed: %1").arg(outcome.error));
+    emit runFinished(false);
+    return;
+  }
+  const RigidRegistrationResult& result = *outcome.result;
+  if (!result.trustworthy) {
+    setStatus(tr("Rigid registration cannot be trusted: %1; no transform added.").arg(QString::fromStdString(result.failureReason)));
+    emit runFinished(false);
+    return;
+  }
+  auto node = scene_.findByName<TransformNode>(resultNodeName().toStdString());
+  if (node) {
+    node->setTransformFromParent(result.intraopToPreop);
+  } else {
+    node = scene_.add(TransformNode::create(resultNodeName().toStdString(), result.intraopToPreop));
+  }
+  QString text = tr("Done in %1 s: rotation %2 degrees, translation %3 mm, NMI %4, overlap %5.")
+                   .arg(outcome.seconds, 0, 'f', 1)
+                   .arg(result.rotationDegrees, 0, 'f', 2)
+                   .arg(result.translationMm, 0, 'f', 2)
+                   .arg(result.normalizedMutualInformation, 0, 'f', 3)
+                   .arg(result.overlap, 0, 'f', 2);
+  for (const std::string& warning : result.warnings) text += "\n" + tr("Warning: %1").arg(QString::fromStdString(warning));
+  setStatus(text);
+  emit runFinished(true);
+}
+
+} // namespace brainshift
