@@ -5,11 +5,20 @@
 #include <QString>
 #include <QtPlugin>
 
+#include <array>
+#include <functional>
+
 class QWidget;
 
 namespace brainshift {
 
 class Scene;
+
+/// What the host offers a panel besides the scene.
+struct ModuleContext {
+  /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
+  std::function<void(const std::array<double, 3>& lps)> showPoint;
+};
 
 class ModulePlugin {
 public:
@@ -17,10 +26,10 @@ public:
   /// What the module selector shows ("Rigid registration").
   virtual QString moduleTitle() const = 0;
   /// The module's panel, bound to `scene`. The host owns the scene and outlives the panel.
-  virtual QWidget* createPanel(Scene& scene, QWidget* parent) = 0;
+  virtual QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) = 0;
 };
 
 } // namespace brainshift
 
-#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.0"
+#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.1"
 Q_DECLARE_INTERFACE(brainshift::ModulePlugin, BrainShiftModulePlugin_iid)

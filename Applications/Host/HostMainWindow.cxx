@@ -67,10 +67,16 @@ void HostMainWindow::addModules(const QString& modulesFolder)
 {
   ModuleDiscovery discovery = discoverModules(modulesFolder);
   moduleFailures_ = discovery.failures;
+  ModuleContext context;
+  context.showPoint = [this](const std::array<double, 3>& lps) {
+    PhysicalPoint p;
+    for (int i = 0; i < 3; ++i) p[i] = lps[i];
+    views_->setCursorPosition(p);
+  };
   for (const LoadedModule& module : discovery.modules) {
     const QString title = module.plugin->moduleTitle();
     try {
-      QWidget* panel = module.plugin->createPanel(scene_, panels_);
+      QWidget* panel = module.plugin->createPanel(scene_, context, panels_);
       if (!panel) throw std::runtime_error("the module made no panel");
       auto* scroll = new QScrollArea(panels_);
       scroll->setWidgetResizable(true);

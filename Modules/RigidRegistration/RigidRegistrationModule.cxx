@@ -12,7 +12,10 @@ class RigidRegistrationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Rigid registration"); }
-  QWidget* createPanel(Scene& scene, QWidget* parent) override { return new RigidRegistrationPanel(scene, parent); }
+  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override
+  {
+    return new RigidRegistrationPanel(scene, parent);
+  }
 };
 
 } // namespace brainshift

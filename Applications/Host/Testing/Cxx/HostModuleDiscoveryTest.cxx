@@ -3,7 +3,13 @@
 #include "BrainShiftTestingSupport.h"
 #include "HostMainWindow.h"
 
+#include "SyntheticData.h"
+
+#include <itkIdentityTransform.h>
+
 #include <QApplication>
+#include <QPushButton>
+#include <QTableWidget>
 #include <QFile>
 #include <QSurfaceFormat>
 
@@ -19,7 +25,22 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
     {
       HostMainWindow host(defaultModulesFolder());
       BS_CHECK_MSG(host.moduleFailures().empty(), host.lastMessage().toStdString());
-      BS_CHECK(host.moduleTitles() == QStringList({"Data", "Rigid registration"}));
+      BS_CHECK_MSG(host.moduleTitles() == QStringList({"Data", "Evaluation", "Rigid registration"}),
+                   host.moduleTitles().join(", ").toStdString());
+
+      // A module panel reaches the views through the host's context: a click on a landmark's
+      // row in the evaluation table moves the linked cursor to the landmark.
+      auto identity = itk::IdentityTransform<double, 3>::New();
+      host.scene().add(TransformNode::create("identity", identity.GetPointer()));
+      host.scene().add(LandmarksNode::create("landmarks", {{"brain-01", testing::point(1, 2, 3), testing::point(4, 5, 6)}}));
+      BS_CHECK(host.selectModule("Evaluation"));
+      auto* evaluate = host.currentPanel()->findChild<QPushButton*>("evaluateButton");
+      auto* table = host.currentPanel()->findChild<QTableWidget*>("errorTable");
+      BS_CHECK(evaluate && table);
+      evaluate->click();
+      BS_CHECK(table->rowCount() == 1);
+      emit table->cellClicked(0, 1);
+      BS_CHECK(host.views()->cursorPosition() == testing::point(4, 5, 6));
     }
 
     // A folder with the rigid module and a broken one.
