@@ -93,11 +93,13 @@ void HostMainWindow::addModules(const QString& modulesFolder)
 void HostMainWindow::showModuleFailures()
 {
   if (moduleFailures_.empty()) {
-    lastMessage_ = tr("%n module(s) loaded", nullptr, moduleSelector_->count() - 1);
+    const int loaded = moduleSelector_->count() - 1;
+    lastMessage_ = tr("%1 module%2 loaded").arg(loaded).arg(loaded == 1 ? "" : "s");
   } else {
     QStringList lines;
     for (const ModuleLoadFailure& failure : moduleFailures_) lines << tr("%1: %2").arg(failure.file, failure.reason);
-    lastMessage_ = tr("%n module(s) could not be loaded: ", nullptr, int(moduleFailures_.size())) + lines.join("; ");
+    const int failed = int(moduleFailures_.size());
+    lastMessage_ = tr("%1 module%2 could not be loaded: ").arg(failed).arg(failed == 1 ? "" : "s") + lines.join("; ");
     for (const QString& line : lines) qWarning("brainshift-host: module not loaded: %s", qPrintable(line));
   }
   statusBar()->showMessage(lastMessage_);

@@ -1,5 +1,5 @@
-// The host finds the rigid registration module in the modules folder; a file that is not a
-// plugin and a missing folder are reported and the host starts all the same.
+// The host finds the modules in the modules folder; a file that is not a plugin, a module whose
+// panel throws and a missing folder are reported, and the host starts all the same.
 #include "BrainShiftTestingSupport.h"
 #include "HostMainWindow.h"
 
@@ -46,15 +46,18 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
     // A folder with the rigid module and a broken one.
     const auto folder = testing::temporaryFolder("HostModuleDiscoveryTest");
     BS_CHECK(QFile::copy(BRAINSHIFT_RIGID_MODULE_FILE, QString::fromStdString((folder / "libBrainShiftRigidRegistrationModule.so").string())));
+    BS_CHECK(QFile::copy(BRAINSHIFT_THROWING_MODULE_FILE, QString::fromStdString((folder / "libThrowingTestModule.so").string())));
     std::ofstream(folder / "libBrokenModule.so") << "not a shared object\n";
     std::ofstream(folder / "README.txt") << "not a library: ignored\n";
     HostMainWindow host(QString::fromStdString(folder.string()));
     host.show();
     BS_CHECK(host.moduleTitles() == QStringList({"Data", "Rigid registration"}));
-    BS_CHECK(host.moduleFailures().size() == 1);
-    BS_CHECK(host.moduleFailures().front().file.endsWith("libBrokenModule.so"));
-    BS_CHECK(!host.moduleFailures().front().reason.isEmpty());
-    BS_CHECK_MSG(host.lastMessage().contains("could not be loaded") && host.lastMessage().contains("libBrokenModule.so"),
+    BS_CHECK(host.moduleFailures().size() == 2);
+    BS_CHECK(host.moduleFailures()[0].file.endsWith("libBrokenModule.so"));
+    BS_CHECK(!host.moduleFailures()[0].reason.isEmpty());
+    BS_CHECK(host.moduleFailures()[1].file.endsWith("libThrowingTestModule.so"));
+    BS_CHECK(host.moduleFailures()[1].reason.contains("throws on purpose"));
+    BS_CHECK_MSG(host.lastMessage().contains("2 modules could not be loaded") && host.lastMessage().contains("libBrokenModule.so"),
                  host.lastMessage().toStdString());
     BS_CHECK(host.selectModule("Rigid registration"));
     QWidget* panel = host.currentPanel();
