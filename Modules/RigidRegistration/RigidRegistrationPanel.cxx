@@ -31,10 +31,11 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
   preop_->setObjectName("preopSelector");
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   preopLabels_->setObjectName("preopLabelsSelector");
-  useLabels_ = new QCheckBox(tr("Limit the metric to the preoperative head (labels)"), this);
+  useLabels_ = new QCheckBox(tr("Mask the metric with the labels"), this);
   run_ = new QPushButton(tr("Run"), this);
   cancel_ = new QPushButton(tr("Cancel"), this);
   progress_ = new QProgressBar(this);
+  progress_->setTextVisible(false);
   status_ = new QLabel(tr("Idle"), this);
   status_->setWordWrap(true);
   status_->setObjectName("status");
@@ -57,11 +58,12 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
   intraop_->setScene(&scene_);
   preop_->setScene(&scene_);
   preopLabels_->setScene(&scene_);
-  // The usual case: the intraoperative and preoperative roles pick themselves.
-  for (const auto& volume : scene_.nodesOfType<ScalarVolumeNode>()) {
-    if (volume->role() == "intraop") intraop_->setCurrentNodeId(QString::fromStdString(volume->id()));
-    if (volume->role() == "preop") preop_->setCurrentNodeId(QString::fromStdString(volume->id()));
-  }
+  // The usual case: volumes with the intraoperative and preoperative roles pick themselves, now
+  // and when a scene is loaded later (the selectors follow the scene before this observer runs).
+  for (const auto& node : scene_.nodes()) chooseByRole(*node);
+  sceneObserver_ = scene_.addObserver([this](const SceneEvent& event) {
+    if (event.type == SceneEventType::NodeAdded || event.type == SceneEventType::NodeModified) chooseByRole(*event.node);
+  });
   useLabels_->setChecked(preopLabels_->count() > 0);
 
   connect(run_, &QPushButton::clicked, this, &RigidRegistrationPanel::run);
@@ -71,9 +73,28 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
 
 RigidRegistrationPanel::~RigidRegistrationPanel()
 {
+  scene_.removeObserver(sceneObserver_);
   intraop_->setScene(nullptr);
   preop_->setScene(nullptr);
   preopLabels_->setScene(nullptr);
+}
+
+void RigidRegistrationPanel::chooseByRole(const Node& node)
+{
+  if (running_) return;
+  const QString id = QString::fromStdString(node.id());
+  // A selector whose choice does not have the role takes the first node that has it.
+  auto offer = [&id](NodeSelector* selector, const std::string& role, const Node& candidate) {
+    const auto current = selector->currentNode();
+    return candidate.role() == role && (!current || current.get() == &candidate || current->role() != role) &&
+           selector->setCurrentNodeId(id);
+  };
+  if (node.kind() == NodeKind::ScalarVolume) {
+    offer(intraop_, "intraop", node);
+    offer(preop_, "preop", node);
+  } else if (node.kind() == NodeKind::LabelMapVolume) {
+    if (offer(preopLabels_, "preop", node)) useLabels_->setChecked(true);
+  }
 }
 
 QString RigidRegistrationPanel::statusText() const

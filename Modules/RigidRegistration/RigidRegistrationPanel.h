@@ -57,6 +57,7 @@ private:
   void finish(const Outcome& outcome);
   void setRunning(bool running);
   void setStatus(const QString& text);
+  void chooseByRole(const Node& node);
 
   Scene& scene_;
   RigidRegistrationParameters parameters_;
@@ -65,6 +66,7 @@ private:
   QPushButton *run_, *cancel_;
   QProgressBar* progress_;
   QLabel* status_;
+  Scene::ObserverId sceneObserver_ = 0;
   bool running_ = false;
   unsigned currentRun_ = 0; ///< runs are numbered; a result of another run than this is discarded
 };

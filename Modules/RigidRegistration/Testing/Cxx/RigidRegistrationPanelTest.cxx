@@ -21,8 +21,9 @@ int RigidRegistrationPanelTest(int argc, char* argv[])
   return brainshift::testing::runTest("RigidRegistrationPanelTest", [] {
     using namespace brainshift;
     Scene scene;
-    const testing::CaseInScene c = testing::addSmallCase(scene);
+    // The panel exists before the data (as in the host): the roles choose the inputs as they arrive.
     RigidRegistrationPanel panel(scene);
+    const testing::CaseInScene c = testing::addSmallCase(scene);
     panel.setParameters(testing::quickRigidParameters());
     BS_CHECK(panel.intraopSelector()->currentNode() == c.intraop);
     BS_CHECK(panel.preopSelector()->currentNode() == c.preop);
