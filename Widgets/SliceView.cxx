@@ -20,10 +20,12 @@
 #include <vtkUnsignedCharArray.h>
 
 #include <QMouseEvent>
+#include <QTimer>
 #include <QWheelEvent>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace brainshift {
 
@@ -110,6 +112,9 @@ SliceView::SliceView(SliceOrientation orientation, QWidget* parent)
   vtkNew<vtkInteractorStyleUser> passive;
   interactor()->SetInteractorStyle(passive);
   setMinimumSize(120, 120);
+  flicker_ = new QTimer(this);
+  flicker_->setInterval(500);
+  connect(flicker_, &QTimer::timeout, this, [this] { setFlickerShowsComparison(!flickerShowsComparison_); });
 }
 
 SliceView::~SliceView()
@@ -140,12 +145,49 @@ void SliceView::setOverlay(std::shared_ptr<ScalarVolumeNode> node)
   updateLayers();
 }
 
+void SliceView::setComparison(std::shared_ptr<ScalarVolumeNode> node)
+{
+  comparison_ = std::move(node);
+  updateLayers();
+}
+
+void SliceView::setComparisonMode(ComparisonMode mode)
+{
+  comparisonMode_ = mode;
+  if (mode == ComparisonMode::Flicker) flicker_->start();
+  else flicker_->stop();
+  reslice();
+  renderWindow()->Render();
+}
+
+void SliceView::setCheckerSize(double millimetres)
+{
+  checkerSize_ = std::max(millimetres, 1e-3);
+  reslice();
+  renderWindow()->Render();
+}
+
+void SliceView::setFlickerShowsComparison(bool showsComparison)
+{
+  flickerShowsComparison_ = showsComparison;
+  reslice();
+  renderWindow()->Render();
+}
+
+void SliceView::setLabelOutline(bool outline)
+{
+  labelOutline_ = outline;
+  reslice();
+  renderWindow()->Render();
+}
+
 void SliceView::updateLayers()
 {
   const bool hadLayers = !backgroundVolume_.empty() || !labelVolume_.empty() || !overlayVolume_.empty();
   backgroundVolume_ = background_ && background_->image() ? ResliceableVolume(*background_->image()) : ResliceableVolume();
   labelVolume_ = labelMap_ && labelMap_->image() ? ResliceableVolume(*labelMap_->image()) : ResliceableVolume();
   overlayVolume_ = overlay_ && overlay_->image() ? ResliceableVolume(*overlay_->image()) : ResliceableVolume();
+  comparisonVolume_ = comparison_ && comparison_->image() ? ResliceableVolume(*comparison_->image()) : ResliceableVolume();
   if (!backgroundVolume_.empty()) {
     backgroundRange_ = backgroundVolume_.scalarRange();
     if (!windowLevelSetHere_) {
@@ -246,12 +288,15 @@ void SliceView::reslice()
     return volume.empty() ? nullptr : volume.slice(plane_);
   };
   const auto backgroundSlice = valuesOf(backgroundVolume_), labelSlice = valuesOf(labelVolume_), overlaySlice = valuesOf(overlayVolume_);
+  const bool comparing = comparisonMode_ != ComparisonMode::Off && !comparisonVolume_.empty() && !backgroundVolume_.empty();
+  const auto comparisonSlice = comparing ? comparisonVolume_.slice(plane_) : nullptr;
   auto scalars = [](const vtkSmartPointer<vtkImageData>& image) {
     return image ? static_cast<const float*>(image->GetScalarPointer()) : nullptr;
   };
   const float* background = scalars(backgroundSlice);
   const float* labels = scalars(labelSlice);
   const float* overlay = scalars(overlaySlice);
+  const float* comparison = scalars(comparisonSlice);
 
   vtkNew<vtkLookupTable> overlayColors; // ColdToHotRainbow: blue through green to red
   VolumeDisplay overlayDisplay;
@@ -271,14 +316,43 @@ void SliceView::reslice()
   composed->SetSpacing(plane_.spacing, plane_.spacing, 1.0);
   composed->AllocateScalars(VTK_UNSIGNED_CHAR, 4);
   auto* rgba = static_cast<unsigned char*>(composed->GetScalarPointer());
+  // A label pixel of an outline has a 4-neighbour with another label (or the slice's edge).
+  auto onOutline = [&](vtkIdType i) {
+    const int u = int(i % plane_.sizeU), v = int(i / plane_.sizeU);
+    const float label = labels[i];
+    if (u == 0 || v == 0 || u == plane_.sizeU - 1 || v == plane_.sizeV - 1) return true;
+    return labels[i - 1] != label || labels[i + 1] != label || labels[i - plane_.sizeU] != label || labels[i + plane_.sizeU] != label;
+  };
   for (vtkIdType i = 0; i < pixels; ++i, rgba += 4) {
     rgba[0] = rgba[1] = rgba[2] = rgba[3] = 0;
-    if (background && std::isfinite(background[i])) {
-      const auto grey = (unsigned char)std::lround(255.0 * std::clamp((background[i] - low) / window_, 0.0, 1.0));
+    double value = background ? background[i] : std::numeric_limits<double>::quiet_NaN();
+    double shade = 0.0; // 0..1
+    if (comparison) {
+      const double other = comparison[i];
+      switch (comparisonMode_) {
+      case ComparisonMode::Checkerboard: {
+        const int u = int(i % plane_.sizeU), v = int(i / plane_.sizeU);
+        const long column = long(std::floor((plane_.originU + u * plane_.spacing) / checkerSize_));
+        const long row = long(std::floor((plane_.originV + v * plane_.spacing) / checkerSize_));
+        if ((column + row) % 2 != 0) value = other;
+        break;
+      }
+      case ComparisonMode::Flicker:
+        if (flickerShowsComparison_) value = other;
+        break;
+      case ComparisonMode::Difference:
+        value = std::isfinite(value) && std::isfinite(other) ? value - other : std::numeric_limits<double>::quiet_NaN();
+        break;
+      case ComparisonMode::Off: break;
+      }
+    }
+    if (std::isfinite(value)) {
+      shade = comparison && comparisonMode_ == ComparisonMode::Difference ? 0.5 + value / window_ : (value - low) / window_;
+      const auto grey = (unsigned char)std::lround(255.0 * std::clamp(shade, 0.0, 1.0));
       rgba[0] = rgba[1] = rgba[2] = grey;
       rgba[3] = 255;
     }
-    if (labels && std::isfinite(labels[i]) && labels[i] > 0.5 && labelOpacity > 0) {
+    if (labels && std::isfinite(labels[i]) && labels[i] > 0.5 && labelOpacity > 0 && (!labelOutline_ || onOutline(i))) {
       const auto color = labelColor(int(std::lround(labels[i])));
       blend(rgba, color.data(), labelOpacity);
     }

@@ -20,11 +20,17 @@ class vtkImageActor;
 class vtkActor;
 class vtkPolyData;
 class vtkRenderer;
+class QTimer;
 
 namespace brainshift {
 
 enum class SliceOrientation { Axial, Sagittal, Coronal };
 QString toString(SliceOrientation orientation);
+
+/// How the comparison volume (say the warped preoperative scan) is shown against the background
+/// (the intraoperative scan): not at all, in alternating squares, as their difference (mid grey:
+/// equal), or in turns (flicker, twice a second).
+enum class ComparisonMode { Off, Checkerboard, Difference, Flicker };
 
 class SliceView : public QVTKOpenGLNativeWidget {
   Q_OBJECT
@@ -48,6 +54,20 @@ public:
   std::array<double, 2> windowLevel() const { return {window_, level_}; }
   void setLabelOpacity(double opacity);
   double labelOpacity() const { return labelOpacity_; }
+  /// Labels as outlines (the pixels with a differently labelled neighbour) instead of filled.
+  void setLabelOutline(bool outline);
+  bool labelOutline() const { return labelOutline_; }
+
+  /// The volume compared with the background, on the background's window/level.
+  void setComparison(std::shared_ptr<ScalarVolumeNode> node);
+  const std::shared_ptr<ScalarVolumeNode>& comparison() const { return comparison_; }
+  void setComparisonMode(ComparisonMode mode);
+  ComparisonMode comparisonMode() const { return comparisonMode_; }
+  /// The checkerboard's square, mm.
+  void setCheckerSize(double millimetres);
+  /// Flicker: whether the comparison volume is the one shown now (the timer toggles it).
+  void setFlickerShowsComparison(bool showsComparison);
+  bool flickerShowsComparison() const { return flickerShowsComparison_; }
 
   /// Moves the slice through `p` and the cross-hair onto it.
   void setCursorPosition(const PhysicalPoint& p);
@@ -76,7 +96,13 @@ private:
   SliceOrientation orientation_;
   std::shared_ptr<ScalarVolumeNode> background_, overlay_;
   std::shared_ptr<LabelMapVolumeNode> labelMap_;
-  ResliceableVolume backgroundVolume_, labelVolume_, overlayVolume_;
+  std::shared_ptr<ScalarVolumeNode> comparison_;
+  ResliceableVolume backgroundVolume_, labelVolume_, overlayVolume_, comparisonVolume_;
+  ComparisonMode comparisonMode_ = ComparisonMode::Off;
+  double checkerSize_ = 20.0;
+  bool flickerShowsComparison_ = false;
+  QTimer* flicker_;
+  bool labelOutline_ = false;
   std::array<double, 2> backgroundRange_{0, 1}, overlayRange_{0, 1};
   double window_ = 1, level_ = 0.5;
   bool windowLevelSetHere_ = false;

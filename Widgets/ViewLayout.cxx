@@ -69,6 +69,21 @@ void ViewLayout::setOverlay(std::shared_ptr<ScalarVolumeNode> node)
   setCursorPosition(slices_[0]->cursorPosition());
 }
 
+void ViewLayout::setComparison(std::shared_ptr<ScalarVolumeNode> node)
+{
+  for (SliceView* view : slices_) view->setComparison(node);
+}
+
+void ViewLayout::setComparisonMode(ComparisonMode mode)
+{
+  for (SliceView* view : slices_) view->setComparisonMode(mode);
+}
+
+void ViewLayout::setLabelOutline(bool outline)
+{
+  for (SliceView* view : slices_) view->setLabelOutline(outline);
+}
+
 void ViewLayout::updateLayers()
 {
   for (SliceView* view : slices_) view->updateLayers();

@@ -32,6 +32,10 @@ public:
   void setBackground(std::shared_ptr<ScalarVolumeNode> node);
   void setLabelMap(std::shared_ptr<LabelMapVolumeNode> node);
   void setOverlay(std::shared_ptr<ScalarVolumeNode> node);
+  /// The volume compared with the background, and how (see ComparisonMode).
+  void setComparison(std::shared_ptr<ScalarVolumeNode> node);
+  void setComparisonMode(ComparisonMode mode);
+  void setLabelOutline(bool outline);
   /// After a layer's data or display changed.
   void updateLayers();
 

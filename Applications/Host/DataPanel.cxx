@@ -1,5 +1,7 @@
 #include "DataPanel.h"
 
+#include <QCheckBox>
+#include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QFormLayout>
 #include <QLabel>
@@ -17,6 +19,10 @@ DataPanel::DataPanel(Scene& scene, ViewLayout& views, QWidget* parent)
   background_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   labelMap_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   overlay_ = new NodeSelector({NodeKind::ScalarVolume}, "overlay", this);
+  comparison_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
+  comparisonMode_ = new QComboBox(this);
+  comparisonMode_->addItems({tr("Off"), tr("Checkerboard"), tr("Difference"), tr("Flicker")}); // ComparisonMode's order
+  labelOutline_ = new QCheckBox(tr("Outline"), this);
   labelOpacity_ = new QSlider(Qt::Horizontal, this);
   labelOpacity_->setRange(0, 100);
   labelOpacity_->setValue(50);
@@ -36,9 +42,12 @@ DataPanel::DataPanel(Scene& scene, ViewLayout& views, QWidget* parent)
   form->addRow(tr("Background"), background_);
   form->addRow(tr("Label map"), labelMap_);
   form->addRow(tr("Label opacity"), labelOpacity_);
+  form->addRow(QString(), labelOutline_);
   form->addRow(tr("Overlay"), overlay_);
   form->addRow(tr("Overlay threshold"), overlayThreshold_);
   form->addRow(tr("Overlay opacity"), overlayOpacity_);
+  form->addRow(tr("Compare with"), comparison_);
+  form->addRow(tr("Comparison"), comparisonMode_);
   auto* column = new QVBoxLayout(this);
   column->addLayout(form);
   column->addWidget(new QLabel(tr("Scene"), this));
@@ -47,6 +56,13 @@ DataPanel::DataPanel(Scene& scene, ViewLayout& views, QWidget* parent)
   background_->setScene(&scene_);
   labelMap_->setScene(&scene_);
   overlay_->setScene(&scene_);
+  comparison_->setScene(&scene_);
+  connect(comparison_, &NodeSelector::currentNodeChanged, this, [this] {
+    views_.setComparison(std::dynamic_pointer_cast<ScalarVolumeNode>(comparison_->currentNode()));
+  });
+  connect(comparisonMode_, qOverload<int>(&QComboBox::currentIndexChanged), this,
+          [this](int index) { views_.setComparisonMode(ComparisonMode(index)); });
+  connect(labelOutline_, &QCheckBox::toggled, this, [this](bool outline) { views_.setLabelOutline(outline); });
   connect(background_, &NodeSelector::currentNodeChanged, this, &DataPanel::showChosenLayers);
   connect(labelMap_, &NodeSelector::currentNodeChanged, this, &DataPanel::showChosenLayers);
   connect(overlay_, &NodeSelector::currentNodeChanged, this, [this] {
@@ -72,6 +88,7 @@ DataPanel::~DataPanel()
   background_->setScene(nullptr);
   labelMap_->setScene(nullptr);
   overlay_->setScene(nullptr);
+  comparison_->setScene(nullptr);
   static_cast<SceneNodeModel*>(nodes_->model())->setScene(nullptr);
 }
 

@@ -6,6 +6,8 @@
 
 #include <QWidget>
 
+class QCheckBox;
+class QComboBox;
 class QDoubleSpinBox;
 class QListView;
 class QSlider;
@@ -21,6 +23,8 @@ public:
   NodeSelector* backgroundSelector() const { return background_; }
   NodeSelector* labelMapSelector() const { return labelMap_; }
   NodeSelector* overlaySelector() const { return overlay_; }
+  NodeSelector* comparisonSelector() const { return comparison_; }
+  QComboBox* comparisonModeBox() const { return comparisonMode_; }
 
 private:
   void showChosenLayers();
@@ -28,7 +32,9 @@ private:
 
   Scene& scene_;
   ViewLayout& views_;
-  NodeSelector *background_, *labelMap_, *overlay_;
+  NodeSelector *background_, *labelMap_, *overlay_, *comparison_;
+  QComboBox* comparisonMode_;
+  QCheckBox* labelOutline_;
   QSlider *labelOpacity_, *overlayOpacity_;
   QDoubleSpinBox* overlayThreshold_;
   QListView* nodes_;

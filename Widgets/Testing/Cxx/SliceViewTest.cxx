@@ -10,6 +10,7 @@
 #include <QApplication>
 #include <QSignalSpy>
 #include <QSurfaceFormat>
+#include <QTimer>
 #include <QTest>
 
 #include <iostream>
@@ -120,6 +121,33 @@ int SliceViewTest(int argc, char* argv[])
     overlay->setDisplay(hidden);
     view.updateLayers();
     BS_CHECK(*view.colorAt(point(15, 2, 10)) == *grey);
+
+    // Labels as outlines: the region's edge (x = 9) is coloured, its inside (x = 5) is not.
+    view.setLabelOutline(true);
+    BS_CHECK(*view.colorAt(point(5, 10, 10)) == *grey);
+    BS_CHECK(*view.colorAt(point(9, 10, 10)) == *labelled);
+    view.setLabelOutline(false);
+    view.setLabelMap(nullptr);
+
+    // Comparison with a volume of 200 on the background's window (level 100, window 200).
+    view.setComparison(ScalarVolumeNode::create("warped", testing::makeUniformImage({20, 20, 20}, 200.0f)));
+    view.setCheckerSize(10.0);
+    view.setComparisonMode(ComparisonMode::Checkerboard);
+    // Squares in plane coordinates (u = x, v = -y on the axial slice): (0, -1) and (1, -2) show
+    // the comparison, (1, -1) the background.
+    BS_CHECK((*view.colorAt(point(5, 5, 10)))[0] == 255);
+    BS_CHECK((*view.colorAt(point(15, 5, 10)))[0] == 128);
+    BS_CHECK((*view.colorAt(point(15, 15, 10)))[0] == 255);
+    view.setComparisonMode(ComparisonMode::Difference);
+    BS_CHECK((*view.colorAt(point(5, 5, 10)))[0] == 0); // 100 - 200 = -window/2: black; equal: mid grey
+    view.setComparisonMode(ComparisonMode::Flicker);
+    view.setFlickerShowsComparison(true);
+    BS_CHECK((*view.colorAt(point(5, 5, 10)))[0] == 255);
+    QSignalSpy frames(view.findChild<QTimer*>(), &QTimer::timeout);
+    BS_CHECK(frames.wait(2000)); // the flicker timer turns it back
+    BS_CHECK(!view.flickerShowsComparison() && (*view.colorAt(point(5, 5, 10)))[0] == 128);
+    view.setComparisonMode(ComparisonMode::Off);
+    BS_CHECK((*view.colorAt(point(5, 5, 10)))[0] == 128);
 
     // The cursor moves the slice; a click picks the point under the mouse, on the slice.
     view.setCursorPosition(point(10, 10, 4));
