@@ -3,23 +3,13 @@
 #include <QCheckBox>
 #include <QElapsedTimer>
 #include <QFormLayout>
-#include <QFutureWatcher>
 #include <QLabel>
 #include <QProgressBar>
 #include <QPushButton>
 #include <QVBoxLayout>
-#include <QtConcurrent/QtConcurrentRun>
 
-#include <optional>
 
 namespace brainshift {
-
-struct RigidRegistrationPanel::Outcome {
-  unsigned run = 0;
-  std::optional<RigidRegistrationResult> result;
-  QString error;
-  double seconds = 0;
-};
 
 RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
   : QWidget(parent)
@@ -39,6 +29,13 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
   status_ = new QLabel(tr("Idle"), this);
   status_->setWordWrap(true);
   status_->setObjectName("status");
+  work_ = new BackgroundRun(this);
+  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
+    setRunning(false);
+    setStatus(tr("Rigid registration failed: %1").arg(message));
+    emit runFinished(false);
+  });
+  connect(work_, &BackgroundRun::discarded, this, &RigidRegistrationPanel::discardedRunFinished);
 
   auto* form = new QFormLayout;
   form->addRow(tr("Intraoperative (fixed)"), intraop_);
@@ -81,7 +78,7 @@ RigidRegistrationPanel::~RigidRegistrationPanel()
 
 void RigidRegistrationPanel::chooseByRole(const Node& node)
 {
-  if (running_) return;
+  if (isRunning()) return;
   const QString id = QString::fromStdString(node.id());
   // A selector whose choice does not have the role takes the first node that has it.
   auto offer = [&id](NodeSelector* selector, const std::string& role, const Node& candidate) {
@@ -109,7 +106,6 @@ void RigidRegistrationPanel::setStatus(const QString& text)
 
 void RigidRegistrationPanel::setRunning(bool running)
 {
-  running_ = running;
   run_->setEnabled(!running);
   cancel_->setEnabled(running);
   intraop_->setEnabled(!running);
@@ -123,7 +119,7 @@ void RigidRegistrationPanel::setRunning(bool running)
 
 void RigidRegistrationPanel::run()
 {
-  if (running_) return;
+  if (isRunning()) return;
   auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
   auto preop = std::dynamic_pointer_cast<ScalarVolumeNode>(preop_->currentNode());
   if (!intraop || !preop || !intraop->image() || !preop->image()) {
@@ -139,56 +135,31 @@ void RigidRegistrationPanel::run()
   // The worker holds its own references to the images: the scene may change meanwhile (nodes
   // replace images rather than edit them in place), and nothing of the scene is touched off
   // the GUI thread.
-  const unsigned run = ++currentRun_;
   ScalarImage::ConstPointer fixedImage = intraop->image(), movingImage = preop->image();
   LabelImage::ConstPointer movingLabels = labels ? labels->image() : nullptr;
   const RigidRegistrationParameters parameters = parameters_;
-  auto* watcher = new QFutureWatcher<Outcome>(this);
-  connect(watcher, &QFutureWatcher<Outcome>::finished, this, [this, watcher] {
-    const Outcome outcome = watcher->result();
-    watcher->deleteLater();
-    if (outcome.run != currentRun_ || !running_) {
-      emit discardedRunFinished();
-      return;
-    }
-    finish(outcome);
-  });
-  watcher->setFuture(QtConcurrent::run([run, fixedImage, movingImage, movingLabels, parameters]() {
-    Outcome outcome;
-    outcome.run = run;
+  work_->start([this, fixedImage, movingImage, movingLabels, parameters]() -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
-    try {
-      outcome.result = registerRigidly(*fixedImage, *movingImage, movingLabels.GetPointer(), parameters);
-    } catch (const std::exception& e) {
-      outcome.error = QString::fromStdString(e.what());
-    } catch (...) {
-      outcome.error = "an unknown error in the rigid registration";
-    }
-    outcome.seconds = clock.elapsed() / 1000.0;
-    return outcome;
-  }));
+    const RigidRegistrationResult result = registerRigidly(*fixedImage, *movingImage, movingLabels.GetPointer(), parameters);
+    const double seconds = clock.elapsed() / 1000.0;
+    return [this, result, seconds] { finish(result, seconds); };
+  });
   setRunning(true);
   setStatus(tr("Registering %1 to %2 ...").arg(QString::fromStdString(intraop->name()), QString::fromStdString(preop->name())));
 }
 
 void RigidRegistrationPanel::cancel()
 {
-  if (!running_) return;
-  ++currentRun_; // the running run's result no longer belongs to any run
+  if (!isRunning()) return;
+  work_->cancel();
   setRunning(false);
   setStatus(tr("Cancelled; the registration still running in the background will be discarded."));
 }
 
-void RigidRegistrationPanel::finish(const Outcome& outcome)
+void RigidRegistrationPanel::finish(const RigidRegistrationResult& result, double seconds)
 {
   setRunning(false);
-  if (!outcome.error.isEmpty()) {
-    setStatus(tr("Rigid registration failed: %1").arg(outcome.error));
-    emit runFinished(false);
-    return;
-  }
-  const RigidRegistrationResult& result = *outcome.result;
   if (!result.trustworthy) {
     setStatus(tr("Rigid registration cannot be trusted: %1; no transform added.").arg(QString::fromStdString(result.failureReason)));
     emit runFinished(false);
@@ -201,7 +172,7 @@ void RigidRegistrationPanel::finish(const Outcome& outcome)
     node = scene_.add(TransformNode::create(resultNodeName().toStdString(), result.intraopToPreop));
   }
   QString text = tr("Done in %1 s: rotation %2 degrees, translation %3 mm, NMI %4, overlap %5.")
-                   .arg(outcome.seconds, 0, 'f', 1)
+                   .arg(seconds, 0, 'f', 1)
                    .arg(result.rotationDegrees, 0, 'f', 2)
                    .arg(result.translationMm, 0, 'f', 2)
                    .arg(result.normalizedMutualInformation, 0, 'f', 3)

@@ -5,8 +5,10 @@
 // `rigid intraop_to_preop`, appears in the scene as a transform node.
 //
 // Cancel: the logic has no cancel or progress hook (registerRigidly runs to its end), so Cancel
-// abandons the run: the panel is idle at once, and the abandoned run's result is discarded when
-// its worker ends (discardedRunFinished). For the same reason the progress bar is a busy bar.
+// abandons the run (BackgroundRun.h): the panel is idle at once, and the abandoned run's result
+// is discarded when its worker ends (discardedRunFinished). For the same reason the progress bar
+// is a busy bar.
+#include "BackgroundRun.h"
 #include "NodeSelector.h"
 #include "RigidRegistrationLogic.h"
 
@@ -35,7 +37,7 @@ public:
 
   /// The logic's parameters (defaults unless set; tests use a quicker schedule).
   void setParameters(const RigidRegistrationParameters& parameters) { parameters_ = parameters; }
-  bool isRunning() const { return running_; }
+  bool isRunning() const { return work_->isRunning(); }
   QString statusText() const;
   /// The name of the transform node a successful run adds (or updates).
   static QString resultNodeName() { return "rigid intraop_to_preop"; }
@@ -53,8 +55,7 @@ signals:
   void discardedRunFinished();
 
 private:
-  struct Outcome;
-  void finish(const Outcome& outcome);
+  void finish(const RigidRegistrationResult& result, double seconds);
   void setRunning(bool running);
   void setStatus(const QString& text);
   void chooseByRole(const Node& node);
@@ -67,8 +68,7 @@ private:
   QProgressBar* progress_;
   QLabel* status_;
   Scene::ObserverId sceneObserver_ = 0;
-  bool running_ = false;
-  unsigned currentRun_ = 0; ///< runs are numbered; a result of another run than this is discarded
+  BackgroundRun* work_;
 };
 
 } // namespace brainshift
