@@ -127,9 +127,9 @@ SliceView::~SliceView()
 
 void SliceView::setBackground(std::shared_ptr<ScalarVolumeNode> node)
 {
-  const bool first = !background_ && node;
+  // Another volume starts from its own window/level.
+  if (node != background_) windowLevelSetHere_ = false;
   background_ = std::move(node);
-  windowLevelSetHere_ = windowLevelSetHere_ && !first;
   updateLayers();
 }
 

@@ -72,11 +72,13 @@ void ViewLayout::setOverlay(std::shared_ptr<ScalarVolumeNode> node)
 void ViewLayout::setComparison(std::shared_ptr<ScalarVolumeNode> node)
 {
   for (SliceView* view : slices_) view->setComparison(node);
+  updateReadout();
 }
 
 void ViewLayout::setComparisonMode(ComparisonMode mode)
 {
   for (SliceView* view : slices_) view->setComparisonMode(mode);
+  updateReadout();
 }
 
 void ViewLayout::setLabelOutline(bool outline)
@@ -112,6 +114,9 @@ std::vector<LayerValue> ViewLayout::valuesAtCursor() const
     values.push_back({QString::fromStdString(node->name()), label ? std::optional<double>(*label) : std::nullopt});
   }
   if (const auto& node = view->overlay(); node && node->image()) {
+    values.push_back({QString::fromStdString(node->name()), intensityAt(*node->image(), cursor_)});
+  }
+  if (const auto& node = view->comparison(); node && node->image() && view->comparisonMode() != ComparisonMode::Off) {
     values.push_back({QString::fromStdString(node->name()), intensityAt(*node->image(), cursor_)});
   }
   return values;

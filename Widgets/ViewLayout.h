@@ -42,7 +42,8 @@ public:
   /// Moves every slice view's cursor to `p` and updates the readout.
   void setCursorPosition(const PhysicalPoint& p);
   PhysicalPoint cursorPosition() const { return cursor_; }
-  /// The layers' values at the cursor, bottom layer first.
+  /// The layers' values at the cursor, bottom layer first (background, labels, overlay, and the
+  /// comparison volume while a comparison is shown).
   std::vector<LayerValue> valuesAtCursor() const;
   QString readoutText() const;
 

@@ -9,6 +9,7 @@
 #include <itkImageRegionIteratorWithIndex.h>
 
 #include <QApplication>
+#include <QComboBox>
 #include <QSurfaceFormat>
 #include <QTest>
 
@@ -101,6 +102,13 @@ int HostLoadTest(int argc, char* argv[])
     BS_CHECK(*values[2].value == 6.0);          // z > 0
     std::cout << "readout: " << views.readoutText().toStdString() << '\n';
     BS_CHECK(views.readoutText().startsWith("LPS (2.0, -3.0, 4.0) mm") && views.readoutText().contains("labels 2"));
+    // The comparison volume is read out while a comparison is shown.
+    BS_CHECK(host.dataPanel()->comparisonSelector()->setCurrentNodeId(QString::fromStdString(t1->id())));
+    host.dataPanel()->comparisonModeBox()->setCurrentIndex(int(ComparisonMode::Difference));
+    BS_CHECK(axial.comparisonMode() == ComparisonMode::Difference && axial.comparison() == t1);
+    BS_CHECK(views.valuesAtCursor().size() == 4);
+    host.dataPanel()->comparisonModeBox()->setCurrentIndex(int(ComparisonMode::Off));
+    BS_CHECK(views.valuesAtCursor().size() == 3);
     views.setCursorPosition(point(100, 0, 0));
     BS_CHECK(views.readoutText().contains("t1 outside"));
 
