@@ -8,6 +8,7 @@
 #include <array>
 #include <functional>
 
+class QObject;
 class QWidget;
 
 namespace brainshift {
@@ -18,6 +19,9 @@ class Scene;
 struct ModuleContext {
   /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
   std::function<void(const std::array<double, 3>& lps)> showPoint;
+  /// Calls `onPick` with every point the user picks in a slice view (LPS mm), for as long as
+  /// `receiver` lives. May be empty (no views).
+  std::function<void(QObject* receiver, std::function<void(const std::array<double, 3>& lps)> onPick)> subscribeToPicks;
 };
 
 class ModulePlugin {

@@ -25,7 +25,10 @@ ViewLayout::ViewLayout(QWidget* parent)
   threeD_ = new ThreeDView(this);
   for (SliceView* view : slices_) {
     view->setObjectName(toString(view->orientation()) + "SliceView");
-    connect(view, &SliceView::cursorPicked, this, &ViewLayout::setCursorPosition);
+    connect(view, &SliceView::cursorPicked, this, [this](const PhysicalPoint& p) {
+      setCursorPosition(p);
+      emit pointPicked(p);
+    });
   }
   threeD_->setObjectName("ThreeDView");
   // Four-up: axial and 3D on top, coronal and sagittal below (Slicer's conventional layout).

@@ -48,7 +48,10 @@ public:
   QString readoutText() const;
 
 signals:
+  /// The cursor moved (a pick, or setCursorPosition).
   void cursorMoved(const brainshift::PhysicalPoint& p);
+  /// The user picked `p` in a slice view (a click, a drag, the wheel).
+  void pointPicked(const brainshift::PhysicalPoint& p);
 
 private:
   void updateReadout();

@@ -73,6 +73,9 @@ void HostMainWindow::addModules(const QString& modulesFolder)
     for (int i = 0; i < 3; ++i) p[i] = lps[i];
     views_->setCursorPosition(p);
   };
+  context.subscribeToPicks = [this](QObject* receiver, std::function<void(const std::array<double, 3>&)> onPick) {
+    connect(views_, &ViewLayout::pointPicked, receiver, [onPick](const PhysicalPoint& p) { onPick({p[0], p[1], p[2]}); });
+  };
   for (const LoadedModule& module : discovery.modules) {
     const QString title = module.plugin->moduleTitle();
     try {
