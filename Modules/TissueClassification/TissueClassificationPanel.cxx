@@ -28,10 +28,12 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   pickTissue_->setCurrentIndex(2);
   pick_ = new QPushButton(tr("Pick"), this);
   pick_->setCheckable(true);
+  pick_->setObjectName("pickButton");
   pick_->setToolTip(tr("While on, each point picked in a slice view becomes a prototype of the chosen tissue"));
   clear_ = new QPushButton(tr("Clear"), this);
   clear_->setToolTip(tr("Forget the prototypes: the next run chooses them itself"));
   prototypeCounts_ = new QLabel(this);
+  prototypeCounts_->setObjectName("prototypeCounts");
   prototypeCounts_->setWordWrap(true);
   run_ = new QPushButton(tr("Run"), this);
   cancel_ = new QPushButton(tr("Cancel"), this);

@@ -11,6 +11,7 @@
 #include <QPushButton>
 #include <QTableWidget>
 #include <QFile>
+#include <QLabel>
 #include <QSurfaceFormat>
 
 #include <fstream>
@@ -41,6 +42,19 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
       BS_CHECK(table->rowCount() == 1);
       emit table->cellClicked(0, 1);
       BS_CHECK(host.views()->cursorPosition() == testing::point(4, 5, 6));
+
+      // Points picked in a slice view reach a panel that subscribed: with Pick on, the tissue
+      // classification panel lists a prototype; moving the cursor from code does not pick.
+      BS_CHECK(host.selectModule("Tissue classification"));
+      auto* pickButton = host.currentPanel()->findChild<QPushButton*>("pickButton");
+      auto* counts = host.currentPanel()->findChild<QLabel*>("prototypeCounts");
+      BS_CHECK(pickButton && counts && pickButton->isEnabled());
+      pickButton->setChecked(true);
+      host.views()->setCursorPosition(testing::point(1, 1, 1));
+      BS_CHECK(counts->text().startsWith("None"));
+      emit host.views()->sliceView(SliceOrientation::Coronal)->cursorPicked(testing::point(2, 2, 2));
+      BS_CHECK_MSG(counts->text().contains("1 picked"), counts->text().toStdString());
+      BS_CHECK(host.views()->cursorPosition() == testing::point(2, 2, 2));
     }
 
     // A folder with the rigid module and a broken one.
