@@ -26,7 +26,7 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
     {
       HostMainWindow host(defaultModulesFolder());
       BS_CHECK_MSG(host.moduleFailures().empty(), host.lastMessage().toStdString());
-      BS_CHECK_MSG(host.moduleTitles() == QStringList({"Data", "Evaluation", "Meshing", "Rigid registration", "Tissue classification"}),
+      BS_CHECK_MSG(host.moduleTitles() == QStringList({"Data", "Brain deformation", "Evaluation", "Meshing", "Rigid registration", "Tissue classification"}),
                    host.moduleTitles().join(", ").toStdString());
 
       // A module panel reaches the views through the host's context: a click on a landmark's
