@@ -3,6 +3,7 @@
 // a label map, an overlay, the linked cursor and its readout; a scene saved and read back.
 #include "BrainShiftTestingSupport.h"
 #include "HostMainWindow.h"
+#include "OrientationPhantom.h"
 #include "SyntheticData.h"
 #include "VolumeIO.h"
 
@@ -111,6 +112,21 @@ int HostLoadTest(int argc, char* argv[])
     BS_CHECK(views.valuesAtCursor().size() == 3);
     views.setCursorPosition(point(100, 0, 0));
     BS_CHECK(views.readoutText().contains("t1 outside"));
+
+    // A DICOM series (a folder) loads as a volume with its geometry; one with a missing slice is refused.
+    auto t1Image = readScalarVolume(folder / "t1.nii.gz");
+    testing::writeDicomSeries(t1Image, folder / "dicom");
+    testing::writeDicomSeries(t1Image, folder / "dicom-gap", 5);
+    const std::size_t before = host.scene().nodes().size();
+    BS_CHECK_MSG(host.loadVolume(q(folder / "dicom")).isEmpty(), host.lastMessage().toStdString());
+    const auto dicom = std::dynamic_pointer_cast<ScalarVolumeNode>(host.scene().nodes().back());
+    BS_CHECK(dicom && host.scene().nodes().size() == before + 1);
+    BS_CHECK(ImageGeometry::of(dicom->image()).sameGridAs(grid));
+    const QString gap = host.loadVolume(q(folder / "dicom-gap"));
+    std::cout << "DICOM with a gap: " << gap.toStdString() << '\n';
+    BS_CHECK(gap.contains("dicom-gap") && host.scene().nodes().size() == before + 1);
+    host.scene().remove(dicom->id());
+    BS_CHECK(host.dataPanel()->backgroundSelector()->setCurrentNodeId(QString::fromStdString(t1->id())));
 
     // Layouts: one-up shows one view.
     views.setArrangement(ViewArrangement::OneUp3D);
