@@ -33,7 +33,7 @@ HostMainWindow::HostMainWindow(const QString& modulesFolder, QWidget* parent)
   splitter->addWidget(views_);
   splitter->setStretchFactor(0, 0);
   splitter->setStretchFactor(1, 1);
-  splitter->setSizes({320, 900});
+  splitter->setSizes({390, 890});
   setCentralWidget(splitter);
 
   dataPanel_ = new DataPanel(scene_, *views_, panels_);
