@@ -7,7 +7,9 @@ NodeSelector::NodeSelector(std::set<NodeKind> kinds, QString role, QWidget* pare
   , model_(new SceneNodeModel(std::move(kinds), std::move(role), this))
 {
   setModel(model_);
-  setSizeAdjustPolicy(QComboBox::AdjustToContents);
+  // Long node names must not widen the panels: the selector shrinks and elides.
+  setSizeAdjustPolicy(QComboBox::AdjustToMinimumContentsLengthWithIcon);
+  setMinimumContentsLength(12);
   connect(this, qOverload<int>(&QComboBox::currentIndexChanged), this, [this](int) {
     const QString id = currentNodeId();
     if (id != lastEmitted_) {

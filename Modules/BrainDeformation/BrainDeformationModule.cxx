@@ -1,0 +1,20 @@
+// The brain deformation module as a Qt plugin for the host.
+#include "BrainDeformationPanel.h"
+#include "ModulePlugin.h"
+
+#include <QObject>
+
+namespace brainshift {
+
+class BrainDeformationModule : public QObject, public ModulePlugin {
+  Q_OBJECT
+  Q_PLUGIN_METADATA(IID BrainShiftModulePlugin_iid)
+  Q_INTERFACES(brainshift::ModulePlugin)
+public:
+  QString moduleTitle() const override { return tr("Brain deformation"); }
+  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override { return new BrainDeformationPanel(scene, parent); }
+};
+
+} // namespace brainshift
+
+#include "BrainDeformationModule.moc"

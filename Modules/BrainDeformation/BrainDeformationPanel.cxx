@@ -1,0 +1,226 @@
+#include "BrainDeformationPanel.h"
+
+#include "ActiveSurfaceLogic.h"
+#include "BiomechanicalModel.h"
+#include "FiniteElementSolver.h"
+
+#include <vtkPointData.h>
+
+#include <QElapsedTimer>
+#include <QFormLayout>
+#include <QLabel>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QSpinBox>
+#include <QTimer>
+#include <QVBoxLayout>
+
+namespace brainshift {
+
+BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
+  : QWidget(parent)
+  , scene_(scene)
+{
+  mesh_ = new NodeSelector({NodeKind::Model}, {}, this);
+  preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
+  intraopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
+  intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
+  transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
+  ranks_ = new QSpinBox(this);
+  ranks_->setRange(1, 64);
+  ranks_->setValue(1);
+  ranks_->setToolTip(tr("MPI ranks of the finite element solve"));
+  run_ = new QPushButton(tr("Run"), this);
+  cancel_ = new QPushButton(tr("Cancel"), this);
+  progress_ = new QProgressBar(this);
+  progress_->setRange(0, 100);
+  status_ = new QLabel(tr("Idle"), this);
+  status_->setWordWrap(true);
+  work_ = new BackgroundRun(this);
+  boardReader_ = new QTimer(this);
+  boardReader_->setInterval(50);
+  connect(boardReader_, &QTimer::timeout, this, &BrainDeformationPanel::readProgressBoard);
+
+  auto* form = new QFormLayout;
+  form->addRow(tr("Mesh"), mesh_);
+  form->addRow(tr("Preoperative labels"), preopLabels_);
+  form->addRow(tr("Intraoperative labels"), intraopLabels_);
+  form->addRow(tr("Intraoperative volume"), intraop_);
+  form->addRow(tr("Rigid intraop_to_preop"), transform_);
+  form->addRow(tr("Ranks"), ranks_);
+  auto* buttons = new QHBoxLayout;
+  buttons->addWidget(run_);
+  buttons->addWidget(cancel_);
+  auto* column = new QVBoxLayout(this);
+  column->addLayout(form);
+  column->addLayout(buttons);
+  column->addWidget(progress_);
+  column->addWidget(status_);
+  column->addStretch(1);
+
+  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(&scene_);
+  connect(run_, &QPushButton::clicked, this, &BrainDeformationPanel::run);
+  connect(cancel_, &QPushButton::clicked, this, &BrainDeformationPanel::cancel);
+  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
+    setRunning(false);
+    status_->setText(tr("Brain deformation failed: %1").arg(message));
+    emit runFinished(false);
+  });
+  connect(work_, &BackgroundRun::discarded, this, &BrainDeformationPanel::discardedRunFinished);
+  setRunning(false);
+}
+
+BrainDeformationPanel::~BrainDeformationPanel()
+{
+  if (cancelRequested_) cancelRequested_->store(true); // no worker ranks outlive the panel's interest
+  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(nullptr);
+}
+
+QString BrainDeformationPanel::statusText() const
+{
+  return status_->text();
+}
+
+void BrainDeformationPanel::setRunning(bool running)
+{
+  for (QWidget* control : std::initializer_list<QWidget*>{run_, mesh_, preopLabels_, intraopLabels_, intraop_, transform_, ranks_}) {
+    control->setEnabled(!running);
+  }
+  cancel_->setEnabled(running);
+  if (running) boardReader_->start();
+  else boardReader_->stop();
+  if (!running) {
+    progress_->setRange(0, 100);
+    progress_->setValue(0);
+  }
+}
+
+void BrainDeformationPanel::readProgressBoard()
+{
+  if (!board_) return;
+  std::string stage;
+  double fraction = 0;
+  {
+    std::lock_guard<std::mutex> lock(board_->mutex);
+    stage = board_->stage;
+    fraction = board_->fraction;
+  }
+  if (!stage.empty()) showStage(QString::fromStdString(stage), fraction);
+}
+
+void BrainDeformationPanel::showStage(const QString& stage, double fraction)
+{
+  if (!isRunning()) return; // a late report of an abandoned run
+  // The surface stage has no progress: a busy bar. The solve's stages share the bar.
+  if (stage == "surface") {
+    progress_->setRange(0, 0);
+  } else {
+    static const QStringList solverStages{"partition", "assembly", "setup", "solve", "done"};
+    const int index = std::max(0, int(solverStages.indexOf(stage)));
+    progress_->setRange(0, 100);
+    progress_->setValue(int(100.0 * (index + std::clamp(fraction, 0.0, 1.0)) / (solverStages.size() - 1)));
+  }
+  if (stage != lastStage_) {
+    lastStage_ = stage;
+    status_->setText(stage == "surface" ? tr("Matching the brain surface ...") : tr("Finite element solve: %1 ...").arg(stage));
+    emit stageStarted(stage);
+  }
+}
+
+void BrainDeformationPanel::run()
+{
+  if (isRunning()) return;
+  auto meshNode = std::dynamic_pointer_cast<ModelNode>(mesh_->currentNode());
+  auto preopLabels = std::dynamic_pointer_cast<LabelMapVolumeNode>(preopLabels_->currentNode());
+  auto intraopLabels = std::dynamic_pointer_cast<LabelMapVolumeNode>(intraopLabels_->currentNode());
+  auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
+  auto transform = std::dynamic_pointer_cast<TransformNode>(transform_->currentNode());
+  auto* meshData = meshNode ? vtkUnstructuredGrid::SafeDownCast(meshNode->mesh()) : nullptr;
+  if (!meshData || !preopLabels || !preopLabels->image() || !intraopLabels || !intraopLabels->image() || !intraop ||
+      !intraop->image() || !transform || !transform->transformFromParent()) {
+    status_->setText(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
+    return;
+  }
+  // The worker's own copies and references (BackgroundRun.h): the mesh is copied, since the
+  // displacements are attached to it; images and the transform are only read.
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  mesh->DeepCopy(meshData);
+  LabelImage::ConstPointer preop = preopLabels->image(), intraopSegmentation = intraopLabels->image();
+  ScalarImage::ConstPointer image = intraop->image();
+  SpatialTransform::ConstPointer rigid = transform->transformFromParent();
+  const std::string meshId = meshNode->id(), rigidId = transform->id();
+  const int ranks = ranks_->value();
+  auto cancelRequested = std::make_shared<std::atomic<bool>>(false);
+  cancelRequested_ = cancelRequested;
+  auto board = std::make_shared<ProgressBoard>();
+  board_ = board;
+  auto report = [board](const std::string& stage, double fraction) {
+    std::lock_guard<std::mutex> lock(board->mutex);
+    board->stage = stage;
+    board->fraction = fraction;
+  };
+  work_->start([this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks, cancelRequested,
+                report]() -> BackgroundRun::Delivery {
+    QElapsedTimer clock;
+    clock.start();
+    report("surface", 0.0);
+    const ActiveSurfaceResult surface =
+      deformBrainSurface(mesh, preop.GetPointer(), *intraopSegmentation, image.GetPointer(), *rigid, ActiveSurfaceParameters{});
+    if (cancelRequested->load()) throw MethodError("cancelled before the finite element solve");
+    const FiniteElementJob job = finiteElementJobFromModel(mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
+    FiniteElementRunOptions options;
+    options.ranks = ranks;
+    options.worker = workerBesideExecutable();
+    options.cancel = cancelRequested.get();
+    options.progress = report;
+    const FiniteElementResult solved = solveWithWorker(job, options);
+    attachDisplacements(mesh, solved);
+    const double seconds = clock.elapsed() / 1000.0;
+    const auto brainSurface = surface.surface;
+    const std::size_t imposed = surface.imposedNodes;
+    const double maximum = surface.maxDisplacementMm, residual = surface.meanResidualMm;
+    return [this, mesh, brainSurface, meshId, rigidId, imposed, maximum, residual, solved, seconds] {
+      setRunning(false);
+      if (auto meshNode = std::dynamic_pointer_cast<ModelNode>(scene_.node(meshId))) meshNode->setMesh(mesh);
+      auto surfaceNode = scene_.findByName<ModelNode>(surfaceNodeName().toStdString());
+      if (surfaceNode) {
+        surfaceNode->setMesh(brainSurface);
+      } else {
+        surfaceNode = ModelNode::create(surfaceNodeName().toStdString(), brainSurface);
+        ModelDisplay display;
+        display.scalarVisibility = true;
+        display.activeScalarName = "DisplacementMagnitude";
+        surfaceNode->setDisplay(display);
+        surfaceNode->setRole("preop");
+        if (scene_.node(rigidId)) surfaceNode->setParentTransformId(rigidId);
+        scene_.add(surfaceNode);
+      }
+      status_->setText(tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
+                          "rank(s), %7 iterations, residual %8.")
+                         .arg(seconds, 0, 'f', 1)
+                         .arg(imposed)
+                         .arg(maximum, 0, 'f', 1)
+                         .arg(residual, 0, 'f', 2)
+                         .arg(solved.equations)
+                         .arg(solved.ranks)
+                         .arg(solved.iterations)
+                         .arg(solved.relativeResidual, 0, 'e', 1));
+      progress_->setValue(100);
+      emit runFinished(true);
+    };
+  });
+  lastStage_.clear();
+  setRunning(true);
+  showStage("surface", 0.0);
+}
+
+void BrainDeformationPanel::cancel()
+{
+  if (!isRunning()) return;
+  cancelRequested_->store(true); // the solver stops the worker's ranks; a surface stage ends first
+  work_->cancel();
+  setRunning(false);
+  status_->setText(tr("Cancelled."));
+}
+
+} // namespace brainshift

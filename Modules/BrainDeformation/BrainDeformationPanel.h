@@ -1,0 +1,86 @@
+#pragma once
+// The brain deformation panel: binds the active surface (ActiveSurfaceLogic) and the finite
+// element solve (FiniteElementSolver, the MPI worker) to the scene. Inputs: the mesh, the
+// preoperative and intraoperative labels, the intraoperative volume and the rigid transform.
+// Results: the model "brain surface" (coloured by DisplacementMagnitude, under the rigid transform:
+// the contract's model frame) and the mesh's point arrays Displacement and DisplacementMagnitude.
+//
+// Progress and Cancel: the surface stage has no hooks (a busy bar; Cancel abandons it and keeps
+// the solve from starting); the solve reports its stages and fractions, and Cancel stops the
+// worker's ranks (the solver terminates them) besides abandoning the run.
+#include "BackgroundRun.h"
+#include "NodeSelector.h"
+
+#include <QWidget>
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+
+class QLabel;
+class QProgressBar;
+class QPushButton;
+class QSpinBox;
+class QTimer;
+
+namespace brainshift {
+
+struct ActiveSurfaceResult;
+struct FiniteElementResult;
+
+class BrainDeformationPanel : public QWidget {
+  Q_OBJECT
+public:
+  explicit BrainDeformationPanel(Scene& scene, QWidget* parent = nullptr);
+  ~BrainDeformationPanel() override;
+
+  NodeSelector* meshSelector() const { return mesh_; }
+  NodeSelector* preopLabelsSelector() const { return preopLabels_; }
+  NodeSelector* intraopLabelsSelector() const { return intraopLabels_; }
+  NodeSelector* intraopSelector() const { return intraop_; }
+  NodeSelector* transformSelector() const { return transform_; }
+  QSpinBox* ranksBox() const { return ranks_; }
+  QPushButton* runButton() const { return run_; }
+  QPushButton* cancelButton() const { return cancel_; }
+  QProgressBar* progressBar() const { return progress_; }
+  bool isRunning() const { return work_->isRunning(); }
+  QString statusText() const;
+  static QString surfaceNodeName() { return "brain surface"; }
+
+public slots:
+  void run();
+  void cancel();
+
+signals:
+  /// The stage now running: "surface", then the solver's ("partition", "assembly", "setup", "solve").
+  void stageStarted(const QString& stage);
+  void runFinished(bool succeeded);
+  void discardedRunFinished();
+
+private:
+  /// What the worker thread last reported; the panel reads it on a timer (the worker never
+  /// touches a widget).
+  struct ProgressBoard {
+    std::mutex mutex;
+    std::string stage;
+    double fraction = 0;
+  };
+  void showStage(const QString& stage, double fraction);
+  void readProgressBoard();
+  void setRunning(bool running);
+
+  Scene& scene_;
+  NodeSelector *mesh_, *preopLabels_, *intraopLabels_, *intraop_, *transform_;
+  QSpinBox* ranks_;
+  QPushButton *run_, *cancel_;
+  QProgressBar* progress_;
+  QLabel* status_;
+  BackgroundRun* work_;
+  std::shared_ptr<std::atomic<bool>> cancelRequested_; ///< the running run's; the solver polls it
+  std::shared_ptr<ProgressBoard> board_;               ///< the running run's
+  QTimer* boardReader_;
+  QString lastStage_;
+};
+
+} // namespace brainshift

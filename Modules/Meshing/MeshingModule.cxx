@@ -1,0 +1,20 @@
+// The meshing module as a Qt plugin for the host.
+#include "MeshingPanel.h"
+#include "ModulePlugin.h"
+
+#include <QObject>
+
+namespace brainshift {
+
+class MeshingModule : public QObject, public ModulePlugin {
+  Q_OBJECT
+  Q_PLUGIN_METADATA(IID BrainShiftModulePlugin_iid)
+  Q_INTERFACES(brainshift::ModulePlugin)
+public:
+  QString moduleTitle() const override { return tr("Meshing"); }
+  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override { return new MeshingPanel(scene, parent); }
+};
+
+} // namespace brainshift
+
+#include "MeshingModule.moc"

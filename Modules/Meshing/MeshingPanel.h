@@ -1,0 +1,59 @@
+#pragma once
+// The meshing panel: binds LabelMapMesher to the scene. The user picks the preoperative label
+// map, the tissues and the resolution; Run meshes off the GUI thread (BackgroundRun.h: Cancel
+// abandons the run, the logic has no cancel hook); the mesh appears in the scene as the model
+// "mesh" (cell array Label, LPS mm, the preoperative frame), placed under the rigid transform when
+// the scene has one, as ../../../shared/CONTRACT.md's model frame says.
+#include "BackgroundRun.h"
+#include "LabelMapMesher.h"
+#include "NodeSelector.h"
+
+#include <QWidget>
+
+class QDoubleSpinBox;
+class QLabel;
+class QLineEdit;
+class QProgressBar;
+class QPushButton;
+
+namespace brainshift {
+
+class MeshingPanel : public QWidget {
+  Q_OBJECT
+public:
+  explicit MeshingPanel(Scene& scene, QWidget* parent = nullptr);
+  ~MeshingPanel() override;
+
+  NodeSelector* labelsSelector() const { return labels_; }
+  QDoubleSpinBox* resolutionBox() const { return resolution_; }
+  /// The tissues, labels separated by commas or spaces ("2, 3, 4").
+  QLineEdit* tissuesEdit() const { return tissues_; }
+  QPushButton* runButton() const { return run_; }
+  QPushButton* cancelButton() const { return cancel_; }
+  bool isRunning() const { return work_->isRunning(); }
+  QString statusText() const;
+  static QString resultNodeName() { return "mesh"; }
+
+public slots:
+  void run();
+  void cancel();
+
+signals:
+  void runFinished(bool succeeded);
+  void discardedRunFinished();
+
+private:
+  void finish(const LabelMapMesh& result, double seconds);
+  void setRunning(bool running);
+
+  Scene& scene_;
+  NodeSelector* labels_;
+  QDoubleSpinBox* resolution_;
+  QLineEdit* tissues_;
+  QPushButton *run_, *cancel_;
+  QProgressBar* progress_;
+  QLabel* status_;
+  BackgroundRun* work_;
+};
+
+} // namespace brainshift

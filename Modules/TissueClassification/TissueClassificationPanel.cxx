@@ -1,0 +1,207 @@
+#include "TissueClassificationPanel.h"
+
+#include <QComboBox>
+#include <QElapsedTimer>
+#include <QFormLayout>
+#include <QLabel>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QSpinBox>
+#include <QVBoxLayout>
+
+#include <map>
+
+namespace brainshift {
+
+TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleContext& context, QWidget* parent)
+  : QWidget(parent)
+  , scene_(scene)
+{
+  intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
+  preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
+  transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
+  k_ = new QSpinBox(this);
+  k_->setRange(1, 101);
+  k_->setValue(int(TissueClassificationParameters{}.k));
+  pickTissue_ = new QComboBox(this);
+  for (LabelPixel label = 0; label <= 4; ++label) pickTissue_->addItem(QString::fromStdString(tissueName(label)), int(label));
+  pickTissue_->setCurrentIndex(2);
+  pick_ = new QPushButton(tr("Pick"), this);
+  pick_->setCheckable(true);
+  pick_->setObjectName("pickButton");
+  pick_->setToolTip(tr("While on, each point picked in a slice view becomes a prototype of the chosen tissue"));
+  clear_ = new QPushButton(tr("Clear"), this);
+  clear_->setToolTip(tr("Forget the prototypes: the next run chooses them itself"));
+  prototypeCounts_ = new QLabel(this);
+  prototypeCounts_->setObjectName("prototypeCounts");
+  prototypeCounts_->setWordWrap(true);
+  run_ = new QPushButton(tr("Run"), this);
+  cancel_ = new QPushButton(tr("Cancel"), this);
+  progress_ = new QProgressBar(this);
+  progress_->setTextVisible(false);
+  status_ = new QLabel(tr("Idle"), this);
+  status_->setWordWrap(true);
+  work_ = new BackgroundRun(this);
+
+  auto* form = new QFormLayout;
+  form->addRow(tr("Intraoperative volume"), intraop_);
+  form->addRow(tr("Preoperative labels"), preopLabels_);
+  form->addRow(tr("Rigid intraop_to_preop"), transform_);
+  form->addRow(tr("Neighbours (k)"), k_);
+  auto* picking = new QHBoxLayout;
+  picking->addWidget(pickTissue_, 1);
+  picking->addWidget(pick_);
+  picking->addWidget(clear_);
+  form->addRow(tr("Prototypes"), picking);
+  form->addRow(QString(), prototypeCounts_);
+  auto* buttons = new QHBoxLayout;
+  buttons->addWidget(run_);
+  buttons->addWidget(cancel_);
+  auto* column = new QVBoxLayout(this);
+  column->addLayout(form);
+  column->addLayout(buttons);
+  column->addWidget(progress_);
+  column->addWidget(status_);
+  column->addStretch(1);
+
+  intraop_->setScene(&scene_);
+  preopLabels_->setScene(&scene_);
+  transform_->setScene(&scene_);
+  for (const auto& volume : scene_.nodesOfType<ScalarVolumeNode>()) {
+    if (volume->role() == "intraop") intraop_->setCurrentNodeId(QString::fromStdString(volume->id()));
+  }
+  if (context.subscribeToPicks) {
+    context.subscribeToPicks(this, [this](const std::array<double, 3>& lps) {
+      if (pick_->isChecked() && !isRunning()) addPrototype(lps);
+    });
+  } else {
+    pick_->setEnabled(false);
+  }
+  connect(clear_, &QPushButton::clicked, this, &TissueClassificationPanel::clearPrototypes);
+  connect(run_, &QPushButton::clicked, this, &TissueClassificationPanel::run);
+  connect(cancel_, &QPushButton::clicked, this, &TissueClassificationPanel::cancel);
+  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
+    setRunning(false);
+    status_->setText(tr("Classification failed: %1").arg(message));
+    emit runFinished(false);
+  });
+  connect(work_, &BackgroundRun::discarded, this, &TissueClassificationPanel::discardedRunFinished);
+  setRunning(false);
+  showPrototypeCounts();
+}
+
+TissueClassificationPanel::~TissueClassificationPanel()
+{
+  intraop_->setScene(nullptr);
+  preopLabels_->setScene(nullptr);
+  transform_->setScene(nullptr);
+}
+
+QString TissueClassificationPanel::statusText() const
+{
+  return status_->text();
+}
+
+void TissueClassificationPanel::setRunning(bool running)
+{
+  for (QWidget* control : std::initializer_list<QWidget*>{run_, intraop_, preopLabels_, transform_, k_, clear_}) {
+    control->setEnabled(!running);
+  }
+  cancel_->setEnabled(running);
+  progress_->setRange(0, running ? 0 : 1); // no progress hook in the logic: a busy bar
+  progress_->setValue(0);
+}
+
+void TissueClassificationPanel::addPrototype(const std::array<double, 3>& lps)
+{
+  const auto label = LabelPixel(pickTissue_->currentData().toInt());
+  TissuePrototype prototype;
+  prototype.name = tissueName(label) + "-picked-" + std::to_string(++picks_);
+  prototype.label = label;
+  for (int i = 0; i < 3; ++i) prototype.position[i] = lps[i];
+  prototypes_.push_back(prototype);
+  showPrototypeCounts();
+}
+
+void TissueClassificationPanel::clearPrototypes()
+{
+  prototypes_.clear();
+  showPrototypeCounts();
+}
+
+void TissueClassificationPanel::showPrototypeCounts()
+{
+  if (prototypes_.empty()) {
+    prototypeCounts_->setText(tr("None listed: the run chooses them."));
+    return;
+  }
+  std::map<LabelPixel, int> counts;
+  for (const TissuePrototype& p : prototypes_) counts[p.label] += 1;
+  QStringList parts;
+  for (const auto& [label, count] : counts) parts << QString("%1 %2").arg(QString::fromStdString(tissueName(label))).arg(count);
+  prototypeCounts_->setText(tr("Listed: %1 (%2 picked)").arg(parts.join(", ")).arg(picks_));
+}
+
+void TissueClassificationPanel::run()
+{
+  if (isRunning()) return;
+  auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
+  auto labels = std::dynamic_pointer_cast<LabelMapVolumeNode>(preopLabels_->currentNode());
+  auto transform = std::dynamic_pointer_cast<TransformNode>(transform_->currentNode());
+  if (!intraop || !intraop->image() || !labels || !labels->image() || !transform || !transform->transformFromParent()) {
+    status_->setText(tr("Choose the intraoperative volume, the preoperative labels and the rigid transform first."));
+    return;
+  }
+  TissueClassificationParameters parameters;
+  parameters.k = unsigned(k_->value());
+  parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
+  // The worker's own references (see BackgroundRun.h); the list is copied.
+  ScalarImage::ConstPointer image = intraop->image();
+  LabelImage::ConstPointer preopLabels = labels->image();
+  SpatialTransform::ConstPointer rigid = transform->transformFromParent();
+  std::optional<std::vector<TissuePrototype>> given;
+  if (!prototypes_.empty()) given = prototypes_;
+  work_->start([this, image, preopLabels, rigid, given, parameters]() -> BackgroundRun::Delivery {
+    QElapsedTimer clock;
+    clock.start();
+    const TissueClassificationResult result = classifyTissues(*image, *preopLabels, *rigid, given, parameters);
+    const double seconds = clock.elapsed() / 1000.0;
+    return [this, result, seconds] { finish(result, seconds); };
+  });
+  setRunning(true);
+  status_->setText(given ? tr("Classifying with %1 listed prototypes ...").arg(given->size())
+                         : tr("Classifying with automatic prototypes ..."));
+}
+
+void TissueClassificationPanel::cancel()
+{
+  if (!isRunning()) return;
+  work_->cancel();
+  setRunning(false);
+  status_->setText(tr("Cancelled; the classification still running in the background will be discarded."));
+}
+
+void TissueClassificationPanel::finish(const TissueClassificationResult& result, double seconds)
+{
+  setRunning(false);
+  auto node = scene_.findByName<LabelMapVolumeNode>(resultNodeName().toStdString());
+  if (node) {
+    node->setImage(result.labels);
+  } else {
+    node = LabelMapVolumeNode::create(resultNodeName().toStdString(), result.labels);
+    node->setRole("intraop");
+    scene_.add(node);
+  }
+  prototypes_ = result.prototypes; // what was used: the list to correct for the next run
+  showPrototypeCounts();
+  QString text = tr("Done in %1 s: %2 voxels, %3 prototypes%4.")
+                   .arg(seconds, 0, 'f', 1)
+                   .arg(result.voxels)
+                   .arg(result.prototypes.size())
+                   .arg(result.tumourResected ? tr("; the tumour looks resected") : QString());
+  for (const std::string& warning : result.warnings) text += "\n" + tr("Warning: %1").arg(QString::fromStdString(warning));
+  status_->setText(text);
+  emit runFinished(true);
+}
+
+} // namespace brainshift

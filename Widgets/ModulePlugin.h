@@ -1,0 +1,39 @@
+#pragma once
+// The interface a loadable module (Modules/<Stage>/) implements as a Qt plugin, and all that
+// the host knows of a module: its title and a panel bound to the host's scene. Header-only, so
+// modules depend on Widgets and never on the host executable.
+#include <QString>
+#include <QtPlugin>
+
+#include <array>
+#include <functional>
+
+class QObject;
+class QWidget;
+
+namespace brainshift {
+
+class Scene;
+
+/// What the host offers a panel besides the scene.
+struct ModuleContext {
+  /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
+  std::function<void(const std::array<double, 3>& lps)> showPoint;
+  /// Calls `onPick` with every point the user picks in a slice view (LPS mm), for as long as
+  /// `receiver` lives. May be empty (no views).
+  std::function<void(QObject* receiver, std::function<void(const std::array<double, 3>& lps)> onPick)> subscribeToPicks;
+};
+
+class ModulePlugin {
+public:
+  virtual ~ModulePlugin() = default;
+  /// What the module selector shows ("Rigid registration").
+  virtual QString moduleTitle() const = 0;
+  /// The module's panel, bound to `scene`. The host owns the scene and outlives the panel.
+  virtual QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) = 0;
+};
+
+} // namespace brainshift
+
+#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.1"
+Q_DECLARE_INTERFACE(brainshift::ModulePlugin, BrainShiftModulePlugin_iid)
