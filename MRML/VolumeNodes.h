@@ -14,7 +14,8 @@ struct VolumeDisplay {
   std::string colorTable = "Grey";
   std::optional<double> window;       ///< unset: automatic window/level
   std::optional<double> level;
-  std::optional<double> lowerThreshold; ///< overlays: values between the thresholds are hidden
+  /// Overlays: shown where lowerThreshold <= |value| <= upperThreshold, hidden elsewhere.
+  std::optional<double> lowerThreshold;
   std::optional<double> upperThreshold;
   double opacity = 1.0;
 

@@ -11,6 +11,7 @@ struct BackgroundRun::Outcome {
   unsigned run = 0;
   Delivery delivery;
   QString error;
+  bool cancelled = false; ///< ended by CancelledError
 };
 
 BackgroundRun::BackgroundRun(QObject* parent)
@@ -18,20 +19,25 @@ BackgroundRun::BackgroundRun(QObject* parent)
 {
 }
 
-// A worker still going when its owner is destroyed ends unobserved: its watcher goes with this
-// object, and the work holds no reference to it.
-BackgroundRun::~BackgroundRun() = default;
+// A worker still going when its owner is destroyed is told to stop and ends unobserved: its
+// watcher goes with this object, and the work holds no reference to it (only to its flag).
+BackgroundRun::~BackgroundRun()
+{
+  if (cancelFlag_) cancelFlag_->store(true);
+}
 
-bool BackgroundRun::start(std::function<Delivery()> work)
+bool BackgroundRun::start(std::function<Delivery(CancelFlag)> work)
 {
   if (running_) return false;
   const unsigned run = ++currentRun_;
+  cancelFlag_ = std::make_shared<std::atomic<bool>>(false);
+  std::shared_ptr<std::atomic<bool>> flag = cancelFlag_;
   auto* watcher = new QFutureWatcher<Outcome>(this);
   connect(watcher, &QFutureWatcher<Outcome>::finished, this, [this, watcher] {
     const Outcome outcome = watcher->result();
     watcher->deleteLater();
     if (outcome.run != currentRun_ || !running_) {
-      emit discarded();
+      emit discarded(outcome.cancelled);
       return;
     }
     running_ = false;
@@ -43,11 +49,14 @@ bool BackgroundRun::start(std::function<Delivery()> work)
     emit delivered();
   });
   running_ = true;
-  watcher->setFuture(QtConcurrent::run([run, work = std::move(work)] {
+  watcher->setFuture(QtConcurrent::run([run, flag, work = std::move(work)] {
     Outcome outcome;
     outcome.run = run;
     try {
-      outcome.delivery = work();
+      outcome.delivery = work(flag.get());
+    } catch (const CancelledError& e) {
+      outcome.error = QString::fromStdString(e.what()); // dropped: a cancelled run is never current
+      outcome.cancelled = true;
     } catch (const std::exception& e) {
       outcome.error = QString::fromStdString(e.what());
     } catch (...) {
@@ -62,6 +71,7 @@ bool BackgroundRun::start(std::function<Delivery()> work)
 void BackgroundRun::cancel()
 {
   if (!running_) return;
+  if (cancelFlag_) cancelFlag_->store(true);
   ++currentRun_;
   running_ = false;
 }

@@ -1,11 +1,17 @@
 #pragma once
 // Long work off the GUI thread for the module panels. The work runs on Qt's thread pool and
 // returns what to do with its result; that runs later on the GUI thread, so only the GUI thread
-// ever touches the scene (Scene.h). Cancel abandons the run: the logic has no cancel hooks, so its
-// worker goes on to its end and its result is then dropped (discarded()); the panel is free at once.
+// ever touches the scene (Scene.h). Each run gets a cancel flag that the work hands to the logic
+// (its parameters' `cancel`); cancel() sets it, the logic stops at its next check with
+// CancelledError, and whatever the run still returns is dropped (discarded()). The panel is free at
+// once. Destroying the runner cancels its run too, so no worker outlives its panel's interest.
+#include "BrainShiftErrors.h"
+
 #include <QObject>
 
+#include <atomic>
 #include <functional>
+#include <memory>
 
 namespace brainshift {
 
@@ -18,9 +24,9 @@ public:
   explicit BackgroundRun(QObject* parent = nullptr);
   ~BackgroundRun() override;
 
-  /// Starts `work`; false (and nothing started) while a run is going.
-  bool start(std::function<Delivery()> work);
-  /// Abandons the run: not running from now on; its delivery will never happen.
+  /// Starts `work` with this run's cancel flag; false (and nothing started) while a run is going.
+  bool start(std::function<Delivery(CancelFlag)> work);
+  /// Cancels the run: its flag is set, it is not running from now on, its delivery never happens.
   void cancel();
   bool isRunning() const { return running_; }
 
@@ -29,13 +35,15 @@ signals:
   void failed(const QString& message);
   /// The delivery ran.
   void delivered();
-  /// The worker of an abandoned run ended; its result was dropped.
-  void discarded();
+  /// The worker of a cancelled run ended; its result was dropped. `stoppedEarly`: the logic
+  /// stopped on the cancel flag (CancelledError) rather than running to its end.
+  void discarded(bool stoppedEarly);
 
 private:
   struct Outcome;
   bool running_ = false;
   unsigned currentRun_ = 0; ///< a result of any other run than this one is dropped
+  std::shared_ptr<std::atomic<bool>> cancelFlag_; ///< the current run's
 };
 
 } // namespace brainshift

@@ -31,6 +31,7 @@ struct RunOptions {
 void addEvaluateCommand(CLI::App& app);
 void addDemoCommand(CLI::App& app);
 void addRegisterCommand(CLI::App& app);
+void addWatchCommand(CLI::App& app); ///< `watch`, WatchCommand.cxx
 void addStageCommands(CLI::App& app);
 void addBenchCommand(CLI::App& app);
 void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.cxx

@@ -99,6 +99,16 @@ const std::vector<LoadedOverlay>& RunContext::overlays()
 
 void RunContext::loadAllInputs()
 {
+  if (session_ && session_->preoperative) { // a later scan of the session: only the new image is read
+    inputs_ = *session_->preoperative;
+    inputs_->warnings.clear();
+    inputs_->intraopImage = readIntensityImage(options_.intraopImage, &inputs_->warnings);
+    preopImage_ = inputs_->preopImage;
+    preopLabels_ = inputs_->preopLabels;
+    intraopImage_ = inputs_->intraopImage;
+    report_.addWarnings(inputs_->warnings);
+    return;
+  }
   RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, options_.intraopImage, {}};
   for (const std::string& overlay : options_.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
   inputs_ = loadRegistrationInputs(paths);
@@ -106,6 +116,10 @@ void RunContext::loadAllInputs()
   preopLabels_ = inputs_->preopLabels;
   intraopImage_ = inputs_->intraopImage;
   report_.addWarnings(inputs_->warnings);
+  if (session_) {
+    session_->preoperative = *inputs_;
+    session_->preoperative->intraopImage = nullptr;
+  }
 }
 
 namespace {

@@ -3,10 +3,12 @@
 // it, the inputs read once, and the pipeline of stages in order.
 #include "Commands.h"
 #include "Configuration.h"
+#include "FiniteElementSolver.h"
 #include "RegistrationInputs.h"
 #include "RunReport.h"
 
 #include <functional>
+#include <memory>
 #include <optional>
 
 namespace brainshift::cli {
@@ -19,6 +21,15 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
 
 /// The configuration file (or the defaults) with the command-line flags over it, validated.
 Configuration configurationFor(const RunOptions& options);
+
+/// What `brainshift watch` keeps between the scans of one case, in memory: the preoperative inputs
+/// (read and checked once, before surgery) and the finite element worker, served (its partition
+/// and assembled matrix kept; each scan's fixed nodes eliminated anew).
+struct SerialScanSession {
+  std::optional<RegistrationInputs> preoperative; ///< preoperative image, labels, overlays
+  std::unique_ptr<FiniteElementSession> worker;
+  int scans = 0; ///< scans registered so far
+};
 
 /// One run of stages on one case: its options, configuration and report, and its inputs, each read
 /// and checked once, when a stage first asks for it.
@@ -48,6 +59,10 @@ public:
   /// Takes --previous for this case (`fingerprint`: caseFingerprint's): InputError naming the
   /// folder when it is missing, holds no report, or is another case's.
   void usePreviousScan(const nlohmann::json& fingerprint);
+  /// Runs within a watch session: the preoperative inputs come from (or go into) it, and the
+  /// simulate stage solves with its served worker.
+  void joinSession(SerialScanSession& session) { session_ = &session; }
+  SerialScanSession* session() const { return session_; }
 
 private:
   RunOptions options_;
@@ -58,6 +73,7 @@ private:
   LabelImage::Pointer preopLabels_;
   std::optional<std::vector<LoadedOverlay>> overlays_;
   nlohmann::json previousReport_;
+  SerialScanSession* session_ = nullptr;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image

@@ -153,6 +153,41 @@ void runClassifyStage(RunContext& context)
 
 namespace brainshift::cli {
 
+namespace {
+/// A watch session's solve: its served worker when it was prepared for this mesh, materials and
+/// solver options (the scan's fixed nodes are eliminated anew), else a worker prepared now.
+/// Iterative by default: each scan imposes other nodes, and an incomplete Cholesky is set up again
+/// in a fraction of the time a Cholesky factorisation is.
+FiniteElementResult solveInSession(SerialScanSession& session, FiniteElementJob job, const FiniteElementRunOptions& options,
+                                   bool& prepared)
+{
+  if (job.solverOptions.find("-ksp_type") == std::string::npos && job.solverOptions.find("-pc_type") == std::string::npos) {
+    job.solverOptions = "-ksp_type cg -pc_type bjacobi " + job.solverOptions;
+  }
+  auto sameProblem = [&job](const FiniteElementJob& other) {
+    if (other.nodes != job.nodes || other.tetrahedra != job.tetrahedra || other.materialOfTetrahedron != job.materialOfTetrahedron ||
+        other.solverOptions != job.solverOptions || other.materials.size() != job.materials.size()) {
+      return false;
+    }
+    for (std::size_t m = 0; m < job.materials.size(); ++m) {
+      if (other.materials[m].youngsModulus != job.materials[m].youngsModulus ||
+          other.materials[m].poissonRatio != job.materials[m].poissonRatio) {
+        return false;
+      }
+    }
+    return true;
+  };
+  if (session.worker && sameProblem(session.worker->preparedJob())) {
+    prepared = false;
+    return session.worker->solve(job.fixedNodes, job.fixedDisplacements);
+  }
+  session.worker.reset(); // another mesh: its worker stops
+  session.worker = std::make_unique<FiniteElementSession>(job, options);
+  prepared = true;
+  return session.worker->solve(job.fixedDisplacements);
+}
+} // namespace
+
 void runSimulateStage(RunContext& context)
 {
   Stopwatch clock;
@@ -170,10 +205,19 @@ void runSimulateStage(RunContext& context)
     if (stage != "done") std::printf("  simulate: %s\n", stage.c_str());
     std::fflush(stdout);
   };
-  const FiniteElementResult result = solveWithWorker(job, options);
+  bool served = false, prepared = false;
+  FiniteElementResult result;
+  if (SerialScanSession* session = context.session()) {
+    result = solveInSession(*session, job, options, prepared);
+    served = true;
+  } else {
+    result = solveWithWorker(job, options);
+  }
   attachDisplacements(mesh, result);
   writeModel(mesh, meshFile);
   context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},
+                                         {"served", served},
+                                         {"worker_prepared", prepared},
                                          {"equations", result.equations},
                                          {"ranks", result.ranks},
                                          {"iterations", result.iterations},
@@ -371,11 +415,13 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   intraop->setRole("intraop");
   for (const auto& [name, file, image] : warpedScalars) {
     auto node = scene.add(stored(ScalarVolumeNode::create(name, image), file));
-    node->setRole(name == "warped preop image" ? "preop" : "overlay");
+    // On the intraoperative grid: the warped image is "warped" (not a moving image for the rigid
+    // registration), the warped statistics and angiograms overlays.
+    node->setRole(name == "warped preop image" ? "warped" : "overlay");
     if (name != "warped preop image") node->setDisplay(VolumeDisplay::statisticalMap());
   }
   auto labels = scene.add(stored(LabelMapVolumeNode::create("warped preop labels", warpedLabels), warpedLabelsFile));
-  labels->setRole("preop");
+  labels->setRole("warped");
   auto preop = scene.add(stored(ScalarVolumeNode::create("preop image", shared(context.preopImage("warp"))), o.preopImage));
   preop->setRole("preop");
   preop->setParentTransformId(whole->id());

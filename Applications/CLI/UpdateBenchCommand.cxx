@@ -92,7 +92,8 @@ void runUpdateBench(const UpdateBenchOptions& o)
     json report;
     double seconds = 0;
   };
-  auto registerCase = [&](const CaseFiles& files, const fs::path& outputDir, const Setting& s, const fs::path& previous) {
+  auto registerCase = [&](const CaseFiles& files, const fs::path& outputDir, const Setting& s, const fs::path& previous,
+                          SerialScanSession* session = nullptr) {
     RunOptions run;
     run.preopImage = files.preopImage;
     run.preopLabels = files.preopLabels;
@@ -112,6 +113,7 @@ void runUpdateBench(const UpdateBenchOptions& o)
     fs::create_directories(run.outputDir, ec);
     RunReport report(run.outputDir / "report.json");
     RunContext context(run, configuration, report);
+    if (session) context.joinSession(*session);
     Stopwatch clock;
     runRegistration(context);
     return Registration{run.outputDir, report.document(), clock.seconds()};
@@ -201,6 +203,13 @@ void runUpdateBench(const UpdateBenchOptions& o)
         const Registration later = registerCase(files, work / "serial" / "scan-2", s, first.outputDir);
         row(named.name, "brainshift-later-scan", s, later,
             evaluateTransform(*readTransform(later.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
+        // The same two scans in one `brainshift watch` session: the preoperative data read once,
+        // the finite element worker served between them.
+        SerialScanSession session;
+        const Registration watchedFirst = registerCase(earlyFiles, work / "serial" / "watch-1", s, {}, &session);
+        const Registration watchedLater = registerCase(files, work / "serial" / "watch-2", s, watchedFirst.outputDir, &session);
+        row(named.name, "brainshift-watch-later-scan", s, watchedLater,
+            evaluateTransform(*readTransform(watchedLater.outputDir / "intraop_to_preop.h5"), simulated.landmarks), false);
       }
     }
   }

@@ -14,6 +14,7 @@ int main(int argc, char** argv)
   app.require_subcommand(1);
   brainshift::cli::addDemoCommand(app);
   brainshift::cli::addRegisterCommand(app);
+  brainshift::cli::addWatchCommand(app);
   brainshift::cli::addStageCommands(app);
   brainshift::cli::addEvaluateCommand(app);
   brainshift::cli::addBenchCommand(app);

@@ -72,7 +72,7 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
 
 BrainDeformationPanel::~BrainDeformationPanel()
 {
-  if (cancelRequested_) cancelRequested_->store(true); // no worker ranks outlive the panel's interest
+  // work_ goes with this panel and cancels its run: no worker ranks outlive the panel's interest.
   for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(nullptr);
 }
 
@@ -150,8 +150,6 @@ void BrainDeformationPanel::run()
   SpatialTransform::ConstPointer rigid = transform->transformFromParent();
   const std::string meshId = meshNode->id(), rigidId = transform->id();
   const int ranks = ranks_->value();
-  auto cancelRequested = std::make_shared<std::atomic<bool>>(false);
-  cancelRequested_ = cancelRequested;
   auto board = std::make_shared<ProgressBoard>();
   board_ = board;
   auto report = [board](const std::string& stage, double fraction) {
@@ -159,19 +157,21 @@ void BrainDeformationPanel::run()
     board->stage = stage;
     board->fraction = fraction;
   };
-  work_->start([this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks, cancelRequested,
-                report]() -> BackgroundRun::Delivery {
+  work_->start([this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks,
+                report](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
     report("surface", 0.0);
+    ActiveSurfaceParameters surfaceParameters;
+    surfaceParameters.cancel = cancel;
     const ActiveSurfaceResult surface =
-      deformBrainSurface(mesh, preop.GetPointer(), *intraopSegmentation, image.GetPointer(), *rigid, ActiveSurfaceParameters{});
-    if (cancelRequested->load()) throw MethodError("cancelled before the finite element solve");
+      deformBrainSurface(mesh, preop.GetPointer(), *intraopSegmentation, image.GetPointer(), *rigid, surfaceParameters);
+    throwIfCancelled(cancel, "brain deformation");
     const FiniteElementJob job = finiteElementJobFromModel(mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
     FiniteElementRunOptions options;
     options.ranks = ranks;
     options.worker = workerBesideExecutable();
-    options.cancel = cancelRequested.get();
+    options.cancel = cancel;
     options.progress = report;
     const FiniteElementResult solved = solveWithWorker(job, options);
     attachDisplacements(mesh, solved);
@@ -217,8 +217,7 @@ void BrainDeformationPanel::run()
 void BrainDeformationPanel::cancel()
 {
   if (!isRunning()) return;
-  cancelRequested_->store(true); // the solver stops the worker's ranks; a surface stage ends first
-  work_->cancel();
+  work_->cancel(); // the run's flag: the surface stops at its next iteration, the solver stops the worker's ranks
   setRunning(false);
   status_->setText(tr("Cancelled."));
 }

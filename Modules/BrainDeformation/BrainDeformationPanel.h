@@ -5,9 +5,9 @@
 // Results: the model "brain surface" (coloured by DisplacementMagnitude, under the rigid transform:
 // the contract's model frame) and the mesh's point arrays Displacement and DisplacementMagnitude.
 //
-// Progress and Cancel: the surface stage has no hooks (a busy bar; Cancel abandons it and keeps
-// the solve from starting); the solve reports its stages and fractions, and Cancel stops the
-// worker's ranks (the solver terminates them) besides abandoning the run.
+// Progress and Cancel: the surface stage reports no fraction (a busy bar) and stops at its next
+// iteration; the solve reports its stages and fractions, and Cancel stops the worker's ranks (the
+// solver terminates them). One flag, the run's (BackgroundRun.h), cancels both.
 #include "BackgroundRun.h"
 #include "NodeSelector.h"
 
@@ -56,7 +56,7 @@ signals:
   /// The stage now running: "surface", then the solver's ("partition", "assembly", "setup", "solve").
   void stageStarted(const QString& stage);
   void runFinished(bool succeeded);
-  void discardedRunFinished();
+  void discardedRunFinished(bool stoppedEarly); ///< a cancelled run ended (stoppedEarly: on the cancel flag)
 
 private:
   /// What the worker thread last reported; the panel reads it on a timer (the worker never
@@ -77,7 +77,6 @@ private:
   QProgressBar* progress_;
   QLabel* status_;
   BackgroundRun* work_;
-  std::shared_ptr<std::atomic<bool>> cancelRequested_; ///< the running run's; the solver polls it
   std::shared_ptr<ProgressBoard> board_;               ///< the running run's
   QTimer* boardReader_;
   QString lastStage_;

@@ -77,7 +77,7 @@ void MeshingPanel::setRunning(bool running)
   labels_->setEnabled(!running);
   tissues_->setEnabled(!running);
   resolution_->setEnabled(!running);
-  progress_->setRange(0, running ? 0 : 1); // no progress hook in the logic: a busy bar
+  progress_->setRange(0, running ? 0 : 1); // no progress fraction from the logic: a busy bar
   progress_->setValue(0);
 }
 
@@ -106,9 +106,11 @@ void MeshingPanel::run()
     return;
   }
   LabelImage::ConstPointer image = labels->image(); // the worker's own reference (see BackgroundRun.h)
-  work_->start([this, image, parameters]() -> BackgroundRun::Delivery {
+  work_->start([this, image, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
+    MeshingParameters parameters = chosen;
+    parameters.cancel = cancel;
     const LabelMapMesh result = meshLabelMap(*image, parameters);
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };
@@ -122,7 +124,7 @@ void MeshingPanel::cancel()
   if (!isRunning()) return;
   work_->cancel();
   setRunning(false);
-  status_->setText(tr("Cancelled; the meshing still running in the background will be discarded."));
+  status_->setText(tr("Cancelled."));
 }
 
 void MeshingPanel::finish(const LabelMapMesh& result, double seconds)

@@ -1,7 +1,7 @@
 #pragma once
 // The meshing panel: binds LabelMapMesher to the scene. The user picks the preoperative label
 // map, the tissues and the resolution; Run meshes off the GUI thread (BackgroundRun.h: Cancel
-// abandons the run, the logic has no cancel hook); the mesh appears in the scene as the model
+// stops the mesher between its phases); the mesh appears in the scene as the model
 // "mesh" (cell array Label, LPS mm, the preoperative frame), placed under the rigid transform when
 // the scene has one, as ../../../shared/CONTRACT.md's model frame says.
 #include "BackgroundRun.h"
@@ -40,7 +40,7 @@ public slots:
 
 signals:
   void runFinished(bool succeeded);
-  void discardedRunFinished();
+  void discardedRunFinished(bool stoppedEarly); ///< a cancelled run ended (stoppedEarly: on the cancel flag)
 
 private:
   void finish(const LabelMapMesh& result, double seconds);

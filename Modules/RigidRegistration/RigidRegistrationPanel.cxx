@@ -112,7 +112,7 @@ void RigidRegistrationPanel::setRunning(bool running)
   preop_->setEnabled(!running);
   preopLabels_->setEnabled(!running);
   useLabels_->setEnabled(!running);
-  // No progress hook in the logic: a busy bar while running, empty when idle.
+  // No progress fraction from the logic: a busy bar while running, empty when idle.
   progress_->setRange(0, running ? 0 : 1);
   progress_->setValue(0);
 }
@@ -137,10 +137,12 @@ void RigidRegistrationPanel::run()
   // the GUI thread.
   ScalarImage::ConstPointer fixedImage = intraop->image(), movingImage = preop->image();
   LabelImage::ConstPointer movingLabels = labels ? labels->image() : nullptr;
-  const RigidRegistrationParameters parameters = parameters_;
-  work_->start([this, fixedImage, movingImage, movingLabels, parameters]() -> BackgroundRun::Delivery {
+  const RigidRegistrationParameters chosen = parameters_;
+  work_->start([this, fixedImage, movingImage, movingLabels, chosen](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
+    RigidRegistrationParameters parameters = chosen;
+    parameters.cancel = cancel;
     const RigidRegistrationResult result = registerRigidly(*fixedImage, *movingImage, movingLabels.GetPointer(), parameters);
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };
@@ -154,7 +156,7 @@ void RigidRegistrationPanel::cancel()
   if (!isRunning()) return;
   work_->cancel();
   setRunning(false);
-  setStatus(tr("Cancelled; the registration still running in the background will be discarded."));
+  setStatus(tr("Cancelled."));
 }
 
 void RigidRegistrationPanel::finish(const RigidRegistrationResult& result, double seconds)

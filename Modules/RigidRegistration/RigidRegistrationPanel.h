@@ -4,10 +4,9 @@
 // labels that limit the metric; Run registers off the GUI thread; the result, the contract's
 // `rigid intraop_to_preop`, appears in the scene as a transform node.
 //
-// Cancel: the logic has no cancel or progress hook (registerRigidly runs to its end), so Cancel
-// abandons the run (BackgroundRun.h): the panel is idle at once, and the abandoned run's result
-// is discarded when its worker ends (discardedRunFinished). For the same reason the progress bar
-// is a busy bar.
+// Cancel stops the registration at its next optimizer iteration (the run's cancel flag,
+// BackgroundRun.h); the panel is idle at once, and the cancelled run ends with nothing
+// (discardedRunFinished). The logic reports no progress fraction, so the bar is a busy bar.
 #include "BackgroundRun.h"
 #include "NodeSelector.h"
 #include "RigidRegistrationLogic.h"
@@ -52,7 +51,7 @@ signals:
   /// A run ended: true when its transform is in the scene, false on failure (the status says why).
   void runFinished(bool succeeded);
   /// The worker of a cancelled run ended; nothing of it reached the scene.
-  void discardedRunFinished();
+  void discardedRunFinished(bool stoppedEarly); ///< a cancelled run ended (stoppedEarly: on the cancel flag)
 
 private:
   void finish(const RigidRegistrationResult& result, double seconds);

@@ -108,7 +108,7 @@ void TissueClassificationPanel::setRunning(bool running)
     control->setEnabled(!running);
   }
   cancel_->setEnabled(running);
-  progress_->setRange(0, running ? 0 : 1); // no progress hook in the logic: a busy bar
+  progress_->setRange(0, running ? 0 : 1); // no progress fraction from the logic: a busy bar
   progress_->setValue(0);
 }
 
@@ -161,9 +161,11 @@ void TissueClassificationPanel::run()
   SpatialTransform::ConstPointer rigid = transform->transformFromParent();
   std::optional<std::vector<TissuePrototype>> given;
   if (!prototypes_.empty()) given = prototypes_;
-  work_->start([this, image, preopLabels, rigid, given, parameters]() -> BackgroundRun::Delivery {
+  work_->start([this, image, preopLabels, rigid, given, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
+    TissueClassificationParameters parameters = chosen;
+    parameters.cancel = cancel;
     const TissueClassificationResult result = classifyTissues(*image, *preopLabels, *rigid, given, parameters);
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };
@@ -178,7 +180,7 @@ void TissueClassificationPanel::cancel()
   if (!isRunning()) return;
   work_->cancel();
   setRunning(false);
-  status_->setText(tr("Cancelled; the classification still running in the background will be discarded."));
+  status_->setText(tr("Cancelled."));
 }
 
 void TissueClassificationPanel::finish(const TissueClassificationResult& result, double seconds)

@@ -5,7 +5,7 @@
 // used, and while "Pick" is on every point picked in a slice view adds one of the chosen tissue
 // (the radiologist's correction); a run with a list uses exactly the list. The result appears in
 // the scene as the label map "intraop labels" (role intraop). Runs off the GUI thread
-// (BackgroundRun.h: Cancel abandons the run, the logic has no cancel hook).
+// (BackgroundRun.h: Cancel stops the classification within 65,536 voxels of its k-NN).
 #include "BackgroundRun.h"
 #include "ModulePlugin.h"
 #include "NodeSelector.h"
@@ -50,7 +50,7 @@ public slots:
 
 signals:
   void runFinished(bool succeeded);
-  void discardedRunFinished();
+  void discardedRunFinished(bool stoppedEarly); ///< a cancelled run ended (stoppedEarly: on the cancel flag)
 
 private:
   void finish(const TissueClassificationResult& result, double seconds);

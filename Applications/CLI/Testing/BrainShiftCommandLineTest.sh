@@ -81,7 +81,7 @@ DemoSmallCase)
 
 HelpEverywhere)
   expect 0 "" -- "$brainshift" --help
-  for sub in demo register rigid classify mesh surface simulate warp evaluate bench; do
+  for sub in demo register watch rigid classify mesh surface simulate warp evaluate bench; do
     expect 0 "" -- "$brainshift" "$sub" --help
   done
   "$brainshift" register --help | grep -q -- "--solver-options" || fail "register --help lacks --solver-options"
@@ -162,6 +162,60 @@ RegisterBadInput)
   [ -e "$bad/out" ] && fail "register on bad input left outputs in $bad/out: $(ls "$bad/out")"
   after=$(checksums "$bad/inputs" "$case_dir")
   [ "$before" = "$after" ] || fail "inputs were modified"
+  ;;
+
+WatchSession)
+  # Serial scans in one session: each scan registered into its folder as register would, the later
+  # one reusing the earlier's work and the served worker (assembled once, its fixed nodes
+  # eliminated anew); a scan that fails is reported and the session goes on; the exit says so.
+  out=$work/watch
+  rm -rf "$out" && mkdir -p "$out"
+  printf 'not an image' > "$out/broken.nii"
+  status=0
+  "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --overlay fmri="$case_dir/preop_fmri.nii.gz" --output-dir "$out/session" \
+    --scans "$case_dir/intraop_image.nii.gz,$out/broken.nii,$case_dir/intraop_image.nii.gz" >/dev/null 2>"$out/stderr" || status=$?
+  [ "$status" = "1" ] || fail "watch with a broken scan exited $status, expected 1"
+  grep -q "scan 2 ($out/broken.nii)" "$out/stderr" || fail "the broken scan was not named: $(cat "$out/stderr")"
+  for entry in "0 registered" "1 failed: $out/broken.nii" "2 registered"; do
+    index=${entry%% *}
+    expected=${entry#* }
+    outcome=$(json_value "$out/session/watch.json" "['scans'][$index]['outcome']")
+    [ "${outcome:0:${#expected}}" = "$expected" ] || fail "watch.json: scan $((index + 1)) outcome '$outcome', expected '$expected'"
+  done
+  for scan in scan-01 scan-03; do
+    for file in intraop_to_preop.h5 displacement_intraop_to_preop.nrrd warped_preop_image.nii.gz warped_fmri.nii.gz scene.mrml; do
+      [ -s "$out/session/$scan/$file" ] || fail "$scan lacks $file"
+    done
+    [ "$(json_value "$out/session/$scan/report.json" "['stages']['simulate']['served']")" = "True" ] || fail "$scan: not served"
+  done
+  [ "$(json_value "$out/session/scan-01/report.json" "['stages']['simulate']['worker_prepared']")" = "True" ] ||
+    fail "the first scan did not prepare the worker"
+  [ "$(json_value "$out/session/scan-03/report.json" "['stages']['simulate']['worker_prepared']")" = "False" ] ||
+    fail "the later scan prepared a worker again"
+  [ "$(json_value "$out/session/scan-03/report.json" "['previous_scan']")" = "$out/session/scan-01" ] ||
+    fail "the later scan did not follow the last registered one"
+  [ "$(json_value "$out/session/scan-03/report.json" "['stages']['mesh']['reused_from']")" = "$out/session/scan-01/mesh.vtu" ] ||
+    fail "the later scan did not reuse the mesh"
+  # The served solve is the one-shot solve: the same transform as register on the same scan.
+  "$brainshift" evaluate --transform "$out/session/scan-03/intraop_to_preop.h5" --landmarks "$case_dir/landmarks.csv" \
+    --json "$out/tre.json" >/dev/null || fail "evaluate exited $?"
+  float_check "$out/tre.json" "['mean_mm']" "< 1.5"
+  # A folder the scanner writes into: each new image (once its size holds) in name order.
+  mkdir -p "$out/scanner"
+  cp "$case_dir/intraop_image.nii.gz" "$out/scanner/a.nii.gz"
+  cp "$case_dir/intraop_image.nii.gz" "$out/scanner/b.nii.gz"
+  printf 'notes' > "$out/scanner/notes.txt"
+  "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --output-dir "$out/folder" --watch-dir "$out/scanner" --max-scans 2 --poll-seconds 0.1 >/dev/null ||
+    fail "watch --watch-dir exited $?"
+  [ "$(json_value "$out/folder/watch.json" "['scans'][1]['intraop_image']")" = "$out/scanner/b.nii.gz" ] ||
+    fail "the folder's second image was not the second scan"
+  [ -s "$out/folder/scan-02/intraop_to_preop.h5" ] || fail "the folder's second scan wrote no transform"
+  expect 2 "either --scans or --watch-dir" -- "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/none"
+  expect 2 "--watch-dir is not a folder" -- "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/none" --watch-dir "$out/missing"
   ;;
 
 SerialScans)

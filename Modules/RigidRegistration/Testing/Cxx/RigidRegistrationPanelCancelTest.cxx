@@ -1,6 +1,6 @@
-// Cancel: the panel is idle at once, the abandoned run's result never reaches the scene (the
-// logic cannot be interrupted, so its worker ends on its own and is discarded), and the panel can
-// run again right away.
+// Cancel: the panel is idle at once, the registration stops at its next iteration (on the run's
+// cancel flag) instead of running to its end, nothing reaches the scene, and the panel can run
+// again right away.
 #include "BrainShiftTestingSupport.h"
 #include "RigidRegistrationPanel.h"
 #include "RigidRegistrationPanelTestSupport.h"
@@ -32,6 +32,7 @@ int RigidRegistrationPanelCancelTest(int argc, char* argv[])
     BS_CHECK(panel.statusText().startsWith("Cancelled"));
 
     BS_CHECK(discarded.wait(120000));
+    BS_CHECK_MSG(discarded.first().at(0).toBool(), "the cancelled registration ran to its end");
     BS_CHECK(finished.isEmpty());
     BS_CHECK(scene.nodesOfType<TransformNode>().empty());
 
