@@ -8,9 +8,6 @@
 
 #include <QElapsedTimer>
 #include <QFormLayout>
-#include <QLabel>
-#include <QProgressBar>
-#include <QPushButton>
 #include <QSpinBox>
 #include <QTimer>
 #include <QVBoxLayout>
@@ -30,13 +27,7 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
   ranks_->setRange(1, 64);
   ranks_->setValue(1);
   ranks_->setToolTip(tr("MPI ranks of the finite element solve"));
-  run_ = new QPushButton(tr("Run"), this);
-  cancel_ = new QPushButton(tr("Cancel"), this);
-  progress_ = new QProgressBar(this);
-  progress_->setRange(0, 100);
-  status_ = new QLabel(tr("Idle"), this);
-  status_->setWordWrap(true);
-  work_ = new BackgroundRun(this);
+  controls_ = new StageRunControls(tr("Brain deformation"), this);
   boardReader_ = new QTimer(this);
   boardReader_->setInterval(50);
   connect(boardReader_, &QTimer::timeout, this, &BrainDeformationPanel::readProgressBoard);
@@ -48,51 +39,31 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
   form->addRow(tr("Intraoperative volume"), intraop_);
   form->addRow(tr("Rigid intraop_to_preop"), transform_);
   form->addRow(tr("Ranks"), ranks_);
-  auto* buttons = new QHBoxLayout;
-  buttons->addWidget(run_);
-  buttons->addWidget(cancel_);
   auto* column = new QVBoxLayout(this);
   column->addLayout(form);
-  column->addLayout(buttons);
-  column->addWidget(progress_);
-  column->addWidget(status_);
+  column->addWidget(controls_);
   column->addStretch(1);
 
   for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(&scene_);
-  connect(run_, &QPushButton::clicked, this, &BrainDeformationPanel::run);
-  connect(cancel_, &QPushButton::clicked, this, &BrainDeformationPanel::cancel);
-  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
-    setRunning(false);
-    status_->setText(tr("Brain deformation failed: %1").arg(message));
-    emit runFinished(false);
-  });
-  connect(work_, &BackgroundRun::discarded, this, &BrainDeformationPanel::discardedRunFinished);
-  setRunning(false);
+  connect(controls_, &StageRunControls::runRequested, this, &BrainDeformationPanel::run);
+  connect(controls_, &StageRunControls::runningChanged, this, &BrainDeformationPanel::lockInputs);
+  connect(controls_, &StageRunControls::finished, this, &BrainDeformationPanel::runFinished);
+  connect(controls_, &StageRunControls::discarded, this, &BrainDeformationPanel::discardedRunFinished);
 }
 
 BrainDeformationPanel::~BrainDeformationPanel()
 {
-  // work_ goes with this panel and cancels its run: no worker ranks outlive the panel's interest.
+  // The controls go with this panel and cancel its run: no worker ranks outlive the panel's interest.
   for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(nullptr);
 }
 
-QString BrainDeformationPanel::statusText() const
+void BrainDeformationPanel::lockInputs(bool locked)
 {
-  return status_->text();
-}
-
-void BrainDeformationPanel::setRunning(bool running)
-{
-  for (QWidget* control : std::initializer_list<QWidget*>{run_, mesh_, preopLabels_, intraopLabels_, intraop_, transform_, ranks_}) {
-    control->setEnabled(!running);
+  for (QWidget* input : std::initializer_list<QWidget*>{mesh_, preopLabels_, intraopLabels_, intraop_, transform_, ranks_}) {
+    input->setEnabled(!locked);
   }
-  cancel_->setEnabled(running);
-  if (running) boardReader_->start();
+  if (locked) boardReader_->start();
   else boardReader_->stop();
-  if (!running) {
-    progress_->setRange(0, 100);
-    progress_->setValue(0);
-  }
 }
 
 void BrainDeformationPanel::readProgressBoard()
@@ -110,19 +81,16 @@ void BrainDeformationPanel::readProgressBoard()
 
 void BrainDeformationPanel::showStage(const QString& stage, double fraction)
 {
-  if (!isRunning()) return; // a late report of an abandoned run
-  // The surface stage has no progress: a busy bar. The solve's stages share the bar.
-  if (stage == "surface") {
-    progress_->setRange(0, 0);
-  } else {
+  if (!isRunning()) return; // a late report of a cancelled run
+  // The surface stage reports no fraction: the busy bar stays. The solve's stages share the bar.
+  if (stage != "surface") {
     static const QStringList solverStages{"partition", "assembly", "setup", "solve", "done"};
     const int index = std::max(0, int(solverStages.indexOf(stage)));
-    progress_->setRange(0, 100);
-    progress_->setValue(int(100.0 * (index + std::clamp(fraction, 0.0, 1.0)) / (solverStages.size() - 1)));
+    controls_->showFraction((index + std::clamp(fraction, 0.0, 1.0)) / (solverStages.size() - 1));
   }
   if (stage != lastStage_) {
     lastStage_ = stage;
-    status_->setText(stage == "surface" ? tr("Matching the brain surface ...") : tr("Finite element solve: %1 ...").arg(stage));
+    controls_->setStatus(stage == "surface" ? tr("Matching the brain surface ...") : tr("Finite element solve: %1 ...").arg(stage));
     emit stageStarted(stage);
   }
 }
@@ -138,7 +106,7 @@ void BrainDeformationPanel::run()
   auto* meshData = meshNode ? vtkUnstructuredGrid::SafeDownCast(meshNode->mesh()) : nullptr;
   if (!meshData || !preopLabels || !preopLabels->image() || !intraopLabels || !intraopLabels->image() || !intraop ||
       !intraop->image() || !transform || !transform->transformFromParent()) {
-    status_->setText(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
+    controls_->setStatus(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
     return;
   }
   // The worker's own copies and references (BackgroundRun.h): the mesh is copied, since the
@@ -157,7 +125,8 @@ void BrainDeformationPanel::run()
     board->stage = stage;
     board->fraction = fraction;
   };
-  work_->start([this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks,
+  lastStage_.clear();
+  controls_->start(tr("Matching the brain surface ..."), [this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks,
                 report](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
@@ -180,7 +149,6 @@ void BrainDeformationPanel::run()
     const std::size_t imposed = surface.imposedNodes;
     const double maximum = surface.maxDisplacementMm, residual = surface.meanResidualMm;
     return [this, mesh, brainSurface, meshId, rigidId, imposed, maximum, residual, solved, seconds] {
-      setRunning(false);
       if (auto meshNode = std::dynamic_pointer_cast<ModelNode>(scene_.node(meshId))) meshNode->setMesh(mesh);
       auto surfaceNode = scene_.findByName<ModelNode>(surfaceNodeName().toStdString());
       if (surfaceNode) {
@@ -195,31 +163,19 @@ void BrainDeformationPanel::run()
         if (scene_.node(rigidId)) surfaceNode->setParentTransformId(rigidId);
         scene_.add(surfaceNode);
       }
-      status_->setText(tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
-                          "rank(s), %7 iterations, residual %8.")
-                         .arg(seconds, 0, 'f', 1)
-                         .arg(imposed)
-                         .arg(maximum, 0, 'f', 1)
-                         .arg(residual, 0, 'f', 2)
-                         .arg(solved.equations)
-                         .arg(solved.ranks)
-                         .arg(solved.iterations)
-                         .arg(solved.relativeResidual, 0, 'e', 1));
-      progress_->setValue(100);
-      emit runFinished(true);
+      controls_->finish(true, tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
+                                 "rank(s), %7 iterations, residual %8.")
+                                .arg(seconds, 0, 'f', 1)
+                                .arg(imposed)
+                                .arg(maximum, 0, 'f', 1)
+                                .arg(residual, 0, 'f', 2)
+                                .arg(solved.equations)
+                                .arg(solved.ranks)
+                                .arg(solved.iterations)
+                                .arg(solved.relativeResidual, 0, 'e', 1));
     };
   });
-  lastStage_.clear();
-  setRunning(true);
   showStage("surface", 0.0);
-}
-
-void BrainDeformationPanel::cancel()
-{
-  if (!isRunning()) return;
-  work_->cancel(); // the run's flag: the surface stops at its next iteration, the solver stops the worker's ranks
-  setRunning(false);
-  status_->setText(tr("Cancelled."));
 }
 
 } // namespace brainshift

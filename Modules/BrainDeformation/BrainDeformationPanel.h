@@ -8,8 +8,8 @@
 // Progress and Cancel: the surface stage reports no fraction (a busy bar) and stops at its next
 // iteration; the solve reports its stages and fractions, and Cancel stops the worker's ranks (the
 // solver terminates them). One flag, the run's (BackgroundRun.h), cancels both.
-#include "BackgroundRun.h"
 #include "NodeSelector.h"
+#include "StageRunControls.h"
 
 #include <QWidget>
 
@@ -18,7 +18,6 @@
 #include <mutex>
 #include <string>
 
-class QLabel;
 class QProgressBar;
 class QPushButton;
 class QSpinBox;
@@ -41,16 +40,16 @@ public:
   NodeSelector* intraopSelector() const { return intraop_; }
   NodeSelector* transformSelector() const { return transform_; }
   QSpinBox* ranksBox() const { return ranks_; }
-  QPushButton* runButton() const { return run_; }
-  QPushButton* cancelButton() const { return cancel_; }
-  QProgressBar* progressBar() const { return progress_; }
-  bool isRunning() const { return work_->isRunning(); }
-  QString statusText() const;
+  QPushButton* runButton() const { return controls_->runButton(); }
+  QPushButton* cancelButton() const { return controls_->cancelButton(); }
+  QProgressBar* progressBar() const { return controls_->progressBar(); }
+  bool isRunning() const { return controls_->isRunning(); }
+  QString statusText() const { return controls_->statusText(); }
   static QString surfaceNodeName() { return "brain surface"; }
 
 public slots:
   void run();
-  void cancel();
+  void cancel() { controls_->cancel(); }
 
 signals:
   /// The stage now running: "surface", then the solver's ("partition", "assembly", "setup", "solve").
@@ -68,15 +67,12 @@ private:
   };
   void showStage(const QString& stage, double fraction);
   void readProgressBoard();
-  void setRunning(bool running);
+  void lockInputs(bool locked);
 
   Scene& scene_;
   NodeSelector *mesh_, *preopLabels_, *intraopLabels_, *intraop_, *transform_;
   QSpinBox* ranks_;
-  QPushButton *run_, *cancel_;
-  QProgressBar* progress_;
-  QLabel* status_;
-  BackgroundRun* work_;
+  StageRunControls* controls_;
   std::shared_ptr<ProgressBoard> board_;               ///< the running run's
   QTimer* boardReader_;
   QString lastStage_;

@@ -4,16 +4,14 @@
 // stops the mesher between its phases); the mesh appears in the scene as the model
 // "mesh" (cell array Label, LPS mm, the preoperative frame), placed under the rigid transform when
 // the scene has one, as ../../../shared/CONTRACT.md's model frame says.
-#include "BackgroundRun.h"
 #include "LabelMapMesher.h"
 #include "NodeSelector.h"
+#include "StageRunControls.h"
 
 #include <QWidget>
 
 class QDoubleSpinBox;
-class QLabel;
 class QLineEdit;
-class QProgressBar;
 class QPushButton;
 
 namespace brainshift {
@@ -28,15 +26,15 @@ public:
   QDoubleSpinBox* resolutionBox() const { return resolution_; }
   /// The tissues, labels separated by commas or spaces ("2, 3, 4").
   QLineEdit* tissuesEdit() const { return tissues_; }
-  QPushButton* runButton() const { return run_; }
-  QPushButton* cancelButton() const { return cancel_; }
-  bool isRunning() const { return work_->isRunning(); }
-  QString statusText() const;
+  QPushButton* runButton() const { return controls_->runButton(); }
+  QPushButton* cancelButton() const { return controls_->cancelButton(); }
+  bool isRunning() const { return controls_->isRunning(); }
+  QString statusText() const { return controls_->statusText(); }
   static QString resultNodeName() { return "mesh"; }
 
 public slots:
   void run();
-  void cancel();
+  void cancel() { controls_->cancel(); }
 
 signals:
   void runFinished(bool succeeded);
@@ -44,16 +42,13 @@ signals:
 
 private:
   void finish(const LabelMapMesh& result, double seconds);
-  void setRunning(bool running);
+  void lockInputs(bool locked);
 
   Scene& scene_;
   NodeSelector* labels_;
   QDoubleSpinBox* resolution_;
   QLineEdit* tissues_;
-  QPushButton *run_, *cancel_;
-  QProgressBar* progress_;
-  QLabel* status_;
-  BackgroundRun* work_;
+  StageRunControls* controls_;
 };
 
 } // namespace brainshift

@@ -3,11 +3,9 @@
 #include <QCheckBox>
 #include <QElapsedTimer>
 #include <QFormLayout>
-#include <QLabel>
-#include <QProgressBar>
-#include <QPushButton>
 #include <QVBoxLayout>
 
+#include <initializer_list>
 
 namespace brainshift {
 
@@ -22,34 +20,20 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   preopLabels_->setObjectName("preopLabelsSelector");
   useLabels_ = new QCheckBox(tr("Mask the metric with the labels"), this);
-  run_ = new QPushButton(tr("Run"), this);
-  cancel_ = new QPushButton(tr("Cancel"), this);
-  progress_ = new QProgressBar(this);
-  progress_->setTextVisible(false);
-  status_ = new QLabel(tr("Idle"), this);
-  status_->setWordWrap(true);
-  status_->setObjectName("status");
-  work_ = new BackgroundRun(this);
-  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
-    setRunning(false);
-    setStatus(tr("Rigid registration failed: %1").arg(message));
-    emit runFinished(false);
-  });
-  connect(work_, &BackgroundRun::discarded, this, &RigidRegistrationPanel::discardedRunFinished);
+  controls_ = new StageRunControls(tr("Rigid registration"), this);
+  connect(controls_, &StageRunControls::runRequested, this, &RigidRegistrationPanel::run);
+  connect(controls_, &StageRunControls::runningChanged, this, &RigidRegistrationPanel::lockInputs);
+  connect(controls_, &StageRunControls::finished, this, &RigidRegistrationPanel::runFinished);
+  connect(controls_, &StageRunControls::discarded, this, &RigidRegistrationPanel::discardedRunFinished);
 
   auto* form = new QFormLayout;
   form->addRow(tr("Intraoperative (fixed)"), intraop_);
   form->addRow(tr("Preoperative (moving)"), preop_);
   form->addRow(tr("Preoperative labels"), preopLabels_);
   form->addRow(useLabels_);
-  auto* buttons = new QHBoxLayout;
-  buttons->addWidget(run_);
-  buttons->addWidget(cancel_);
   auto* column = new QVBoxLayout(this);
   column->addLayout(form);
-  column->addLayout(buttons);
-  column->addWidget(progress_);
-  column->addWidget(status_);
+  column->addWidget(controls_);
   column->addStretch(1);
 
   intraop_->setScene(&scene_);
@@ -62,10 +46,6 @@ RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
     if (event.type == SceneEventType::NodeAdded || event.type == SceneEventType::NodeModified) chooseByRole(*event.node);
   });
   useLabels_->setChecked(preopLabels_->count() > 0);
-
-  connect(run_, &QPushButton::clicked, this, &RigidRegistrationPanel::run);
-  connect(cancel_, &QPushButton::clicked, this, &RigidRegistrationPanel::cancel);
-  setRunning(false);
 }
 
 RigidRegistrationPanel::~RigidRegistrationPanel()
@@ -94,27 +74,9 @@ void RigidRegistrationPanel::chooseByRole(const Node& node)
   }
 }
 
-QString RigidRegistrationPanel::statusText() const
+void RigidRegistrationPanel::lockInputs(bool locked)
 {
-  return status_->text();
-}
-
-void RigidRegistrationPanel::setStatus(const QString& text)
-{
-  status_->setText(text);
-}
-
-void RigidRegistrationPanel::setRunning(bool running)
-{
-  run_->setEnabled(!running);
-  cancel_->setEnabled(running);
-  intraop_->setEnabled(!running);
-  preop_->setEnabled(!running);
-  preopLabels_->setEnabled(!running);
-  useLabels_->setEnabled(!running);
-  // No progress fraction from the logic: a busy bar while running, empty when idle.
-  progress_->setRange(0, running ? 0 : 1);
-  progress_->setValue(0);
+  for (QWidget* input : std::initializer_list<QWidget*>{intraop_, preop_, preopLabels_, useLabels_}) input->setEnabled(!locked);
 }
 
 void RigidRegistrationPanel::run()
@@ -123,11 +85,11 @@ void RigidRegistrationPanel::run()
   auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
   auto preop = std::dynamic_pointer_cast<ScalarVolumeNode>(preop_->currentNode());
   if (!intraop || !preop || !intraop->image() || !preop->image()) {
-    setStatus(tr("Choose an intraoperative and a preoperative volume first."));
+    controls_->setStatus(tr("Choose an intraoperative and a preoperative volume first."));
     return;
   }
   if (intraop == preop) {
-    setStatus(tr("The intraoperative and the preoperative volume are the same node."));
+    controls_->setStatus(tr("The intraoperative and the preoperative volume are the same node."));
     return;
   }
   auto labels = useLabels_->isChecked() ? std::dynamic_pointer_cast<LabelMapVolumeNode>(preopLabels_->currentNode()) : nullptr;
@@ -138,7 +100,9 @@ void RigidRegistrationPanel::run()
   ScalarImage::ConstPointer fixedImage = intraop->image(), movingImage = preop->image();
   LabelImage::ConstPointer movingLabels = labels ? labels->image() : nullptr;
   const RigidRegistrationParameters chosen = parameters_;
-  work_->start([this, fixedImage, movingImage, movingLabels, chosen](CancelFlag cancel) -> BackgroundRun::Delivery {
+  const QString message =
+    tr("Registering %1 to %2 ...").arg(QString::fromStdString(intraop->name()), QString::fromStdString(preop->name()));
+  controls_->start(message, [this, fixedImage, movingImage, movingLabels, chosen](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
     RigidRegistrationParameters parameters = chosen;
@@ -147,24 +111,13 @@ void RigidRegistrationPanel::run()
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };
   });
-  setRunning(true);
-  setStatus(tr("Registering %1 to %2 ...").arg(QString::fromStdString(intraop->name()), QString::fromStdString(preop->name())));
-}
-
-void RigidRegistrationPanel::cancel()
-{
-  if (!isRunning()) return;
-  work_->cancel();
-  setRunning(false);
-  setStatus(tr("Cancelled."));
 }
 
 void RigidRegistrationPanel::finish(const RigidRegistrationResult& result, double seconds)
 {
-  setRunning(false);
   if (!result.trustworthy) {
-    setStatus(tr("Rigid registration cannot be trusted: %1; no transform added.").arg(QString::fromStdString(result.failureReason)));
-    emit runFinished(false);
+    controls_->finish(false, tr("Rigid registration cannot be trusted: %1; no transform added.")
+                               .arg(QString::fromStdString(result.failureReason)));
     return;
   }
   auto node = scene_.findByName<TransformNode>(resultNodeName().toStdString());
@@ -180,8 +133,7 @@ void RigidRegistrationPanel::finish(const RigidRegistrationResult& result, doubl
                    .arg(result.normalizedMutualInformation, 0, 'f', 3)
                    .arg(result.overlap, 0, 'f', 2);
   for (const std::string& warning : result.warnings) text += "\n" + tr("Warning: %1").arg(QString::fromStdString(warning));
-  setStatus(text);
-  emit runFinished(true);
+  controls_->finish(true, text);
 }
 
 } // namespace brainshift

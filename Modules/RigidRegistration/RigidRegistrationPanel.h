@@ -7,14 +7,13 @@
 // Cancel stops the registration at its next optimizer iteration (the run's cancel flag,
 // BackgroundRun.h); the panel is idle at once, and the cancelled run ends with nothing
 // (discardedRunFinished). The logic reports no progress fraction, so the bar is a busy bar.
-#include "BackgroundRun.h"
 #include "NodeSelector.h"
 #include "RigidRegistrationLogic.h"
+#include "StageRunControls.h"
 
 #include <QWidget>
 
 class QCheckBox;
-class QLabel;
 class QProgressBar;
 class QPushButton;
 
@@ -30,22 +29,22 @@ public:
   NodeSelector* preopSelector() const { return preop_; }
   NodeSelector* preopLabelsSelector() const { return preopLabels_; }
   QCheckBox* useLabelsCheckBox() const { return useLabels_; }
-  QPushButton* runButton() const { return run_; }
-  QPushButton* cancelButton() const { return cancel_; }
-  QProgressBar* progressBar() const { return progress_; }
+  QPushButton* runButton() const { return controls_->runButton(); }
+  QPushButton* cancelButton() const { return controls_->cancelButton(); }
+  QProgressBar* progressBar() const { return controls_->progressBar(); }
 
   /// The logic's parameters (defaults unless set; tests use a quicker schedule).
   void setParameters(const RigidRegistrationParameters& parameters) { parameters_ = parameters; }
-  bool isRunning() const { return work_->isRunning(); }
-  QString statusText() const;
+  bool isRunning() const { return controls_->isRunning(); }
+  QString statusText() const { return controls_->statusText(); }
   /// The name of the transform node a successful run adds (or updates).
   static QString resultNodeName() { return "rigid intraop_to_preop"; }
 
 public slots:
   /// Starts a run; refused (with a status message) while running or without two volumes.
   void run();
-  /// Abandons the running run: idle at once, its result is discarded.
-  void cancel();
+  /// Cancels the running run: idle at once, the registration stops at its next iteration.
+  void cancel() { controls_->cancel(); }
 
 signals:
   /// A run ended: true when its transform is in the scene, false on failure (the status says why).
@@ -55,19 +54,15 @@ signals:
 
 private:
   void finish(const RigidRegistrationResult& result, double seconds);
-  void setRunning(bool running);
-  void setStatus(const QString& text);
+  void lockInputs(bool locked);
   void chooseByRole(const Node& node);
 
   Scene& scene_;
   RigidRegistrationParameters parameters_;
   NodeSelector *intraop_, *preop_, *preopLabels_;
   QCheckBox* useLabels_;
-  QPushButton *run_, *cancel_;
-  QProgressBar* progress_;
-  QLabel* status_;
+  StageRunControls* controls_;
   Scene::ObserverId sceneObserver_ = 0;
-  BackgroundRun* work_;
 };
 
 } // namespace brainshift

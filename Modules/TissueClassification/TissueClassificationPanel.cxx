@@ -4,7 +4,6 @@
 #include <QElapsedTimer>
 #include <QFormLayout>
 #include <QLabel>
-#include <QProgressBar>
 #include <QPushButton>
 #include <QSpinBox>
 #include <QVBoxLayout>
@@ -35,13 +34,7 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   prototypeCounts_ = new QLabel(this);
   prototypeCounts_->setObjectName("prototypeCounts");
   prototypeCounts_->setWordWrap(true);
-  run_ = new QPushButton(tr("Run"), this);
-  cancel_ = new QPushButton(tr("Cancel"), this);
-  progress_ = new QProgressBar(this);
-  progress_->setTextVisible(false);
-  status_ = new QLabel(tr("Idle"), this);
-  status_->setWordWrap(true);
-  work_ = new BackgroundRun(this);
+  controls_ = new StageRunControls(tr("Classification"), this);
 
   auto* form = new QFormLayout;
   form->addRow(tr("Intraoperative volume"), intraop_);
@@ -54,14 +47,9 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   picking->addWidget(clear_);
   form->addRow(tr("Prototypes"), picking);
   form->addRow(QString(), prototypeCounts_);
-  auto* buttons = new QHBoxLayout;
-  buttons->addWidget(run_);
-  buttons->addWidget(cancel_);
   auto* column = new QVBoxLayout(this);
   column->addLayout(form);
-  column->addLayout(buttons);
-  column->addWidget(progress_);
-  column->addWidget(status_);
+  column->addWidget(controls_);
   column->addStretch(1);
 
   intraop_->setScene(&scene_);
@@ -78,15 +66,10 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
     pick_->setEnabled(false);
   }
   connect(clear_, &QPushButton::clicked, this, &TissueClassificationPanel::clearPrototypes);
-  connect(run_, &QPushButton::clicked, this, &TissueClassificationPanel::run);
-  connect(cancel_, &QPushButton::clicked, this, &TissueClassificationPanel::cancel);
-  connect(work_, &BackgroundRun::failed, this, [this](const QString& message) {
-    setRunning(false);
-    status_->setText(tr("Classification failed: %1").arg(message));
-    emit runFinished(false);
-  });
-  connect(work_, &BackgroundRun::discarded, this, &TissueClassificationPanel::discardedRunFinished);
-  setRunning(false);
+  connect(controls_, &StageRunControls::runRequested, this, &TissueClassificationPanel::run);
+  connect(controls_, &StageRunControls::runningChanged, this, &TissueClassificationPanel::lockInputs);
+  connect(controls_, &StageRunControls::finished, this, &TissueClassificationPanel::runFinished);
+  connect(controls_, &StageRunControls::discarded, this, &TissueClassificationPanel::discardedRunFinished);
   showPrototypeCounts();
 }
 
@@ -97,19 +80,9 @@ TissueClassificationPanel::~TissueClassificationPanel()
   transform_->setScene(nullptr);
 }
 
-QString TissueClassificationPanel::statusText() const
+void TissueClassificationPanel::lockInputs(bool locked)
 {
-  return status_->text();
-}
-
-void TissueClassificationPanel::setRunning(bool running)
-{
-  for (QWidget* control : std::initializer_list<QWidget*>{run_, intraop_, preopLabels_, transform_, k_, clear_}) {
-    control->setEnabled(!running);
-  }
-  cancel_->setEnabled(running);
-  progress_->setRange(0, running ? 0 : 1); // no progress fraction from the logic: a busy bar
-  progress_->setValue(0);
+  for (QWidget* input : std::initializer_list<QWidget*>{intraop_, preopLabels_, transform_, k_, clear_}) input->setEnabled(!locked);
 }
 
 void TissueClassificationPanel::addPrototype(const std::array<double, 3>& lps)
@@ -149,7 +122,7 @@ void TissueClassificationPanel::run()
   auto labels = std::dynamic_pointer_cast<LabelMapVolumeNode>(preopLabels_->currentNode());
   auto transform = std::dynamic_pointer_cast<TransformNode>(transform_->currentNode());
   if (!intraop || !intraop->image() || !labels || !labels->image() || !transform || !transform->transformFromParent()) {
-    status_->setText(tr("Choose the intraoperative volume, the preoperative labels and the rigid transform first."));
+    controls_->setStatus(tr("Choose the intraoperative volume, the preoperative labels and the rigid transform first."));
     return;
   }
   TissueClassificationParameters parameters;
@@ -161,7 +134,9 @@ void TissueClassificationPanel::run()
   SpatialTransform::ConstPointer rigid = transform->transformFromParent();
   std::optional<std::vector<TissuePrototype>> given;
   if (!prototypes_.empty()) given = prototypes_;
-  work_->start([this, image, preopLabels, rigid, given, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
+  const QString message = given ? tr("Classifying with %1 listed prototypes ...").arg(given->size())
+                                : tr("Classifying with automatic prototypes ...");
+  controls_->start(message, [this, image, preopLabels, rigid, given, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
     TissueClassificationParameters parameters = chosen;
@@ -170,22 +145,10 @@ void TissueClassificationPanel::run()
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };
   });
-  setRunning(true);
-  status_->setText(given ? tr("Classifying with %1 listed prototypes ...").arg(given->size())
-                         : tr("Classifying with automatic prototypes ..."));
-}
-
-void TissueClassificationPanel::cancel()
-{
-  if (!isRunning()) return;
-  work_->cancel();
-  setRunning(false);
-  status_->setText(tr("Cancelled."));
 }
 
 void TissueClassificationPanel::finish(const TissueClassificationResult& result, double seconds)
 {
-  setRunning(false);
   auto node = scene_.findByName<LabelMapVolumeNode>(resultNodeName().toStdString());
   if (node) {
     node->setImage(result.labels);
@@ -202,8 +165,7 @@ void TissueClassificationPanel::finish(const TissueClassificationResult& result,
                    .arg(result.prototypes.size())
                    .arg(result.tumourResected ? tr("; the tumour looks resected") : QString());
   for (const std::string& warning : result.warnings) text += "\n" + tr("Warning: %1").arg(QString::fromStdString(warning));
-  status_->setText(text);
-  emit runFinished(true);
+  controls_->finish(true, text);
 }
 
 } // namespace brainshift

@@ -6,16 +6,15 @@
 // (the radiologist's correction); a run with a list uses exactly the list. The result appears in
 // the scene as the label map "intraop labels" (role intraop). Runs off the GUI thread
 // (BackgroundRun.h: Cancel stops the classification within 65,536 voxels of its k-NN).
-#include "BackgroundRun.h"
 #include "ModulePlugin.h"
 #include "NodeSelector.h"
+#include "StageRunControls.h"
 #include "TissueClassificationLogic.h"
 
 #include <QWidget>
 
 class QComboBox;
 class QLabel;
-class QProgressBar;
 class QPushButton;
 class QSpinBox;
 
@@ -33,17 +32,17 @@ public:
   /// The tissue a pick adds (a label of TissueClassificationLogic's tissueName).
   QComboBox* pickTissueBox() const { return pickTissue_; }
   QPushButton* pickButton() const { return pick_; }
-  QPushButton* runButton() const { return run_; }
-  QPushButton* cancelButton() const { return cancel_; }
+  QPushButton* runButton() const { return controls_->runButton(); }
+  QPushButton* cancelButton() const { return controls_->cancelButton(); }
   QSpinBox* neighboursBox() const { return k_; }
-  bool isRunning() const { return work_->isRunning(); }
-  QString statusText() const;
+  bool isRunning() const { return controls_->isRunning(); }
+  QString statusText() const { return controls_->statusText(); }
   const std::vector<TissuePrototype>& prototypes() const { return prototypes_; }
   static QString resultNodeName() { return "intraop labels"; }
 
 public slots:
   void run();
-  void cancel();
+  void cancel() { controls_->cancel(); }
   /// Adds a prototype of the chosen tissue at `lps` (what a pick does while Pick is on).
   void addPrototype(const std::array<double, 3>& lps);
   void clearPrototypes();
@@ -54,17 +53,16 @@ signals:
 
 private:
   void finish(const TissueClassificationResult& result, double seconds);
-  void setRunning(bool running);
+  void lockInputs(bool locked);
   void showPrototypeCounts();
 
   Scene& scene_;
   NodeSelector *intraop_, *preopLabels_, *transform_;
   QComboBox* pickTissue_;
-  QPushButton *pick_, *clear_, *run_, *cancel_;
+  QPushButton *pick_, *clear_;
   QSpinBox* k_;
-  QLabel *prototypeCounts_, *status_;
-  QProgressBar* progress_;
-  BackgroundRun* work_;
+  QLabel* prototypeCounts_;
+  StageRunControls* controls_;
   std::vector<TissuePrototype> prototypes_;
   unsigned picks_ = 0;
 };
