@@ -1,6 +1,8 @@
 // The meshing panel on a small two-tissue phantom: the mesh lands in the scene under the rigid
 // transform with its Label cell array; bad tissues give a message and no mesh; Cancel leaves the
-// panel idle at once and the abandoned mesh never reaches the scene.
+// panel idle at once and the cancelled mesh never reaches the scene. Then the small built-in case:
+// its three tissues meshed, every one in the model.
+#include "BrainShiftCaseSimulator.h"
 #include "BrainShiftTestingSupport.h"
 #include "MeshingPanel.h"
 #include "SyntheticData.h"
@@ -9,11 +11,13 @@
 #include <vtkCellData.h>
 
 #include <QApplication>
+#include <QDoubleSpinBox>
 #include <QLineEdit>
 #include <QPushButton>
 #include <QSignalSpy>
 
 #include <iostream>
+#include <set>
 
 int MeshingPanelTest(int argc, char* argv[])
 {
@@ -74,5 +78,28 @@ int MeshingPanelTest(int argc, char* argv[])
     double range[2];
     mesh->mesh()->GetCellData()->GetArray("Label")->GetRange(range);
     BS_CHECK(range[0] == 2 && range[1] == 3);
+
+    // The small built-in case's preoperative labels, as a scene after loading it holds them.
+    CaseParameters small;
+    small.size = CaseSize::Small;
+    const SimulatedCase c = simulateCase(small);
+    Scene caseScene;
+    auto preopLabels = caseScene.add(LabelMapVolumeNode::create("preop labels", c.preopLabels));
+    preopLabels->setRole("preop");
+    MeshingPanel casePanel(caseScene);
+    BS_CHECK(casePanel.labelsSelector()->currentNode() == preopLabels);
+    casePanel.resolutionBox()->setValue(4.0);
+    QSignalSpy caseFinished(&casePanel, &MeshingPanel::runFinished);
+    casePanel.runButton()->click();
+    BS_CHECK(caseFinished.wait(60000));
+    BS_CHECK_MSG(caseFinished.last().at(0).toBool(), casePanel.statusText().toStdString());
+    std::cout << "small case: " << casePanel.statusText().toStdString() << '\n';
+    auto caseMesh = caseScene.findByName<ModelNode>("mesh");
+    BS_CHECK(caseMesh && caseMesh->isVolumetric());
+    std::set<int> tissues;
+    vtkDataArray* label = caseMesh->mesh()->GetCellData()->GetArray("Label");
+    for (vtkIdType cell = 0; cell < label->GetNumberOfTuples(); ++cell) tissues.insert(int(label->GetComponent(cell, 0)));
+    BS_CHECK_MSG((tissues == std::set<int>{2, 3, 4}), tissues.size() << " tissues in the mesh");
+    BS_CHECK(casePanel.statusText().contains(" 0 inverted"));
   });
 }
