@@ -13,7 +13,6 @@
 
 #include <QWidget>
 
-#include <atomic>
 #include <memory>
 #include <mutex>
 #include <string>
