@@ -47,7 +47,7 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
         ->expected(4);
   }
   if (solverFlags) {
-    command->add_option("--ranks", options.ranks, "MPI ranks of the finite element worker (default 1)");
+    command->add_option("--ranks", options.ranks, "MPI ranks of the finite element worker (default 2)");
     command->add_option("--solver-options", options.solverOptions,
                         "PETSc options over the tuned default, e.g. \"-ksp_type gmres -pc_type bjacobi\"");
   }

@@ -4,6 +4,8 @@
 #include "Commands.h"
 #include "Configuration.h"
 #include "FiniteElementSolver.h"
+#include "RigidRegistrationLogic.h"
+#include "TissueClassificationLogic.h"
 #include "RegistrationInputs.h"
 #include "RunReport.h"
 
@@ -27,6 +29,8 @@ Configuration configurationFor(const RunOptions& options);
 /// and assembled matrix kept; each scan's fixed nodes eliminated anew).
 struct SerialScanSession {
   std::optional<RegistrationInputs> preoperative; ///< preoperative image, labels, overlays
+  std::shared_ptr<const PreoperativeTissueMaps> tissueMaps; ///< the classification's, of those labels
+  std::shared_ptr<const PreparedRigidMoving> rigidMoving;   ///< the rigid registration's, of that image
   std::unique_ptr<FiniteElementSession> worker;
   int scans = 0; ///< scans registered so far
 };

@@ -54,6 +54,12 @@ void runRigidStage(RunContext& context)
     if (!isLinearTransform(start)) throw InputError(previousRigid->string() + ": not a rigid transform");
     parameters.initialIntraopToPreop = start;
   }
+  if (SerialScanSession* session = context.session()) { // the preoperative side once per session
+    if (!session->rigidMoving) {
+      session->rigidMoving = prepareRigidMoving(context.preopImage("rigid"), context.preopLabelsIfGiven(), parameters);
+    }
+    parameters.preparedMoving = session->rigidMoving;
+  }
   const RigidRegistrationResult result = registerRigidly(context.intraopImage("rigid"), context.preopImage("rigid"),
                                                          context.preopLabelsIfGiven(), parameters);
   const double seconds = clock.seconds();
@@ -120,6 +126,10 @@ void runClassifyStage(RunContext& context)
   parameters.saturationMm = configuration.classificationSaturationMm;
   parameters.biasCorrection = configuration.classificationBiasCorrection;
   parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
+  if (SerialScanSession* session = context.session()) { // the preoperative maps once per session
+    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
+    parameters.preoperativeMaps = session->tissueMaps;
+  }
   const TissueClassificationResult result = classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"),
                                                             *rigid, prototypes, parameters);
   writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));

@@ -299,6 +299,32 @@ double rotationDifferenceDegrees(const SpatialTransform& a, const SpatialTransfo
   return rotationAngleDegrees(product);
 }
 
+class PreparedRigidMoving {
+public:
+  const ScalarImage* image = nullptr; ///< prepared from (identity, not ownership)
+  const LabelImage* labels = nullptr;
+  std::vector<double> levelSpacingMm;
+  double maskDilationMm = 0;
+  std::vector<ScalarImage::Pointer> levels; ///< coarsest first
+  double threshold = 0;                     ///< foreground, from the coarsest level
+  MaskObject::Pointer mask;                 ///< null without labels
+};
+
+std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
+                                                              const RigidRegistrationParameters& parameters)
+{
+  parameters.validate();
+  auto prepared = std::make_shared<PreparedRigidMoving>();
+  prepared->image = &preop;
+  prepared->labels = preopLabels;
+  prepared->levelSpacingMm = parameters.levelSpacingMm;
+  prepared->maskDilationMm = parameters.maskDilationMm;
+  for (double spacing : parameters.levelSpacingMm) prepared->levels.push_back(shrinkTo(preop, spacing));
+  prepared->threshold = foregroundThreshold(*prepared->levels.front());
+  if (preopLabels) prepared->mask = movingMaskFrom(*preopLabels, parameters.maskDilationMm);
+  return prepared;
+}
+
 RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
                                         const RigidRegistrationParameters& parameters)
 {
@@ -306,15 +332,20 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
   RigidRegistrationResult result;
   const std::size_t levels = parameters.levelSpacingMm.size();
 
-  // The pyramid, coarsest first.
-  std::vector<ScalarImage::Pointer> fixedLevels, movingLevels;
-  for (double spacing : parameters.levelSpacingMm) {
-    fixedLevels.push_back(shrinkTo(intraop, spacing));
-    movingLevels.push_back(shrinkTo(preop, spacing));
+  // The pyramid, coarsest first; the preoperative side as prepared.
+  std::shared_ptr<const PreparedRigidMoving> prepared = parameters.preparedMoving;
+  if (!prepared) {
+    prepared = prepareRigidMoving(preop, preopLabels, parameters);
+  } else if (prepared->image != &preop || prepared->labels != preopLabels || prepared->levelSpacingMm != parameters.levelSpacingMm ||
+             prepared->maskDilationMm != parameters.maskDilationMm) {
+    throw std::invalid_argument("rigid registration: the preoperative side was prepared from other images or settings");
   }
+  std::vector<ScalarImage::Pointer> fixedLevels;
+  for (double spacing : parameters.levelSpacingMm) fixedLevels.push_back(shrinkTo(intraop, spacing));
+  const std::vector<ScalarImage::Pointer>& movingLevels = prepared->levels;
   const double fixedThreshold = foregroundThreshold(*fixedLevels.front());
-  const double movingThreshold = foregroundThreshold(*movingLevels.front());
-  MaskObject::Pointer mask = preopLabels ? movingMaskFrom(*preopLabels, parameters.maskDilationMm) : nullptr;
+  const double movingThreshold = prepared->threshold;
+  const MaskObject::Pointer mask = prepared->mask;
 
   // Start: the fixed foreground centroid maps to the moving foreground centroid, measured over
   // the part of the preoperative head that the intraoperative field of view covers.

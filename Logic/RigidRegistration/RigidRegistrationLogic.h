@@ -11,10 +11,13 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace brainshift {
+
+class PreparedRigidMoving;
 
 struct RigidRegistrationParameters {
   /// Voxel size of each pyramid level, coarsest first, in mm: each image is bin-shrunk (averaged)
@@ -34,6 +37,10 @@ struct RigidRegistrationParameters {
   std::uint64_t seed = 2000;
   /// Polled at every optimizer iteration and start: CancelledError when set.
   CancelFlag cancel = nullptr;
+  /// The preoperative side prepared once (prepareRigidMoving) from the very images given to
+  /// registerRigidly, with the same levels and mask dilation (else std::invalid_argument); null:
+  /// prepared there.
+  std::shared_ptr<const PreparedRigidMoving> preparedMoving;
   /// A known start (for example the previous scan's result): used instead of the multi-start.
   SpatialTransform::ConstPointer initialIntraopToPreop;
 
@@ -63,6 +70,12 @@ struct RigidRegistrationResult {
 
 /// Registers; the images may be anisotropic and on different grids. InputError for images
 /// without foreground; the result says whether it can be trusted.
+/// The preoperative side of the registration, the same for every scan of a case: the moving
+/// image's pyramid, its foreground threshold and the metric's mask from the labels (`labels` may be
+/// null). A session (brainshift watch) prepares it once.
+std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
+                                                              const RigidRegistrationParameters& parameters);
+
 RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop,
                                         const LabelImage* preopLabels, const RigidRegistrationParameters& parameters);
 

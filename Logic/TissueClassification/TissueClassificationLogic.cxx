@@ -363,6 +363,33 @@ void TissueClassificationParameters::validate() const
   }
 }
 
+class PreoperativeTissueMaps {
+public:
+  const LabelImage* labels = nullptr;      ///< prepared from (identity, not ownership)
+  const LabelPixel* voxels = nullptr;      ///< and its buffer then
+  std::set<LabelPixel> present;
+  std::vector<LabelPixel> tissues;         ///< present, in order
+  std::vector<TissueDistance> distances;   ///< one per tissue
+};
+
+std::shared_ptr<const PreoperativeTissueMaps> preparePreoperativeTissueMaps(const LabelImage& preopLabels)
+{
+  auto maps = std::make_shared<PreoperativeTissueMaps>();
+  maps->labels = &preopLabels;
+  maps->voxels = preopLabels.GetBufferPointer();
+  const LabelPixel* l = preopLabels.GetBufferPointer();
+  for (std::size_t i = 0, n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) maps->present.insert(l[i]);
+  for (LabelPixel required : {Background, Parenchyma}) {
+    if (!maps->present.count(required)) {
+      throw InputError("classification: the preoperative labels have no " + tissueName(required) + " (label " +
+                       std::to_string(required) + ")");
+    }
+  }
+  maps->tissues.assign(maps->present.begin(), maps->present.end());
+  maps->distances = tissueDistances(preopLabels, maps->tissues);
+  return maps;
+}
+
 TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
                                            const SpatialTransform& rigid,
                                            const std::optional<std::vector<TissuePrototype>>& given,
@@ -376,19 +403,15 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   result.voxels = N;
 
   // The tissues of the preoperative labels, and their distance maps.
-  std::set<LabelPixel> present;
-  {
-    const LabelPixel* l = preopLabels.GetBufferPointer();
-    for (std::size_t i = 0, n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) present.insert(l[i]);
+  std::shared_ptr<const PreoperativeTissueMaps> maps = P.preoperativeMaps;
+  if (!maps) {
+    maps = preparePreoperativeTissueMaps(preopLabels);
+  } else if (maps->labels != &preopLabels || maps->voxels != preopLabels.GetBufferPointer()) {
+    throw std::invalid_argument("classification: the preoperative tissue maps were prepared from other labels");
   }
-  for (LabelPixel required : {Background, Parenchyma}) {
-    if (!present.count(required)) {
-      throw InputError("classification: the preoperative labels have no " + tissueName(required) + " (label " +
-                       std::to_string(required) + ")");
-    }
-  }
-  const std::vector<LabelPixel> tissues(present.begin(), present.end());
-  const std::vector<TissueDistance> distances = tissueDistances(preopLabels, tissues);
+  const std::set<LabelPixel>& present = maps->present;
+  const std::vector<LabelPixel>& tissues = maps->tissues;
+  const std::vector<TissueDistance>& distances = maps->distances;
   std::vector<DistanceSampler> samplers;
   for (const auto& d : distances) samplers.emplace_back(*d.distance);
   const std::size_t T = tissues.size();

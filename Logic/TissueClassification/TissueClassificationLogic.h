@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -28,9 +29,18 @@ struct TissuePrototype {
   PhysicalPoint position;
 };
 
+/// What the classification derives from the preoperative labels alone: the tissues present and
+/// each one's signed distance map (about 2 mm). The same for every scan of a case, so a session
+/// (brainshift watch) computes it once.
+class PreoperativeTissueMaps;
+std::shared_ptr<const PreoperativeTissueMaps> preparePreoperativeTissueMaps(const LabelImage& preopLabels);
+
 struct TissueClassificationParameters {
   /// Polled between the phases and every 65,536 voxels of the k-NN: CancelledError when set.
   CancelFlag cancel = nullptr;
+  /// Prepared from the very labels given to classifyTissues (else std::invalid_argument); null:
+  /// computed there.
+  std::shared_ptr<const PreoperativeTissueMaps> preoperativeMaps;
   unsigned k = 7;
   double saturationMm = 10.0;          ///< spatial channels: distance to each tissue, capped here
   double intensityWeight = 1.0;        ///< intensity channel, scaled to 0..100 over the head

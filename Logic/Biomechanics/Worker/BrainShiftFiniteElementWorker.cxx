@@ -17,12 +17,14 @@
 #include <petscksp.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <numeric>
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace {
@@ -486,7 +488,16 @@ void serve(const FiniteElementJob& job, int rank, int size)
   for (;;) {
     char line[4096] = {0};
     if (rank == 0 && !std::fgets(line, sizeof(line), stdin)) std::strcpy(line, "quit");
-    MPI_Bcast(line, sizeof(line), MPI_CHAR, 0, PETSC_COMM_WORLD);
+    // Between scans the other ranks wait here for minutes. A blocking broadcast would have them
+    // poll at full speed (Open MPI's shared-memory transport spins), taking a core from the
+    // pipeline's other stages; a test every millisecond costs nothing and answers within one.
+    MPI_Request request;
+    MPI_Ibcast(line, sizeof(line), MPI_CHAR, 0, PETSC_COMM_WORLD, &request);
+    for (int done = 0;;) {
+      MPI_Test(&request, &done, MPI_STATUS_IGNORE);
+      if (done) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
     char command[16] = {0}, valuesFile[2048] = {0}, resultFile[2048] = {0};
     std::sscanf(line, "%15s %2047s %2047s", command, valuesFile, resultFile);
     if (std::strcmp(command, "quit") == 0) return;
