@@ -118,6 +118,7 @@ void BrainDeformationPanel::run()
   SpatialTransform::ConstPointer rigid = transform->transformFromParent();
   const std::string meshId = meshNode->id(), rigidId = transform->id();
   const int ranks = ranks_->value();
+  const std::filesystem::path worker = worker_.empty() ? workerBesideExecutable() : worker_;
   auto board = std::make_shared<ProgressBoard>();
   board_ = board;
   auto report = [board](const std::string& stage, double fraction) {
@@ -127,7 +128,7 @@ void BrainDeformationPanel::run()
   };
   lastStage_.clear();
   controls_->start(tr("Matching the brain surface ..."), [this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks,
-                report](CancelFlag cancel) -> BackgroundRun::Delivery {
+                worker, report](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
     report("surface", 0.0);
@@ -139,7 +140,7 @@ void BrainDeformationPanel::run()
     const FiniteElementJob job = finiteElementJobFromModel(mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
     FiniteElementRunOptions options;
     options.ranks = ranks;
-    options.worker = workerBesideExecutable();
+    options.worker = worker;
     options.cancel = cancel;
     options.progress = report;
     const FiniteElementResult solved = solveWithWorker(job, options);

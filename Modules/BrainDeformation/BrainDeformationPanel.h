@@ -13,6 +13,7 @@
 
 #include <QWidget>
 
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -45,6 +46,8 @@ public:
   bool isRunning() const { return controls_->isRunning(); }
   QString statusText() const { return controls_->statusText(); }
   static QString surfaceNodeName() { return "brain surface"; }
+  /// The finite element worker executable (default: the one beside the running program).
+  void setWorker(const std::filesystem::path& worker) { worker_ = worker; }
 
 public slots:
   void run();
@@ -75,6 +78,7 @@ private:
   std::shared_ptr<ProgressBoard> board_;               ///< the running run's
   QTimer* boardReader_;
   QString lastStage_;
+  std::filesystem::path worker_;
 };
 
 } // namespace brainshift

@@ -2,7 +2,8 @@
 // transform and intraoperative labels): Cancel during the surface stage leaves the panel idle at
 // once and nothing in the scene; a run puts the displacement-coloured brain surface under the
 // rigid transform and the displacements on the mesh, with the bar at its end; an empty
-// segmentation is the logic's error in the panel, the scene untouched.
+// segmentation is the logic's error in the panel, the scene untouched; a finite element worker
+// that dies mid-run is reported in the panel, the scene untouched, and the panel runs again.
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftTestingSupport.h"
 #include "BrainDeformationPanel.h"
@@ -16,6 +17,8 @@
 #include <QPushButton>
 #include <QSignalSpy>
 
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 
 int BrainDeformationPanelTest(int argc, char* argv[])
@@ -85,5 +88,27 @@ int BrainDeformationPanelTest(int argc, char* argv[])
     std::cout << panel.statusText().toStdString() << '\n';
     BS_CHECK(panel.statusText().startsWith("Brain deformation failed"));
     BS_CHECK(surface->mesh() == surfaceBefore && !panel.isRunning());
+
+    // A worker that dies (killed, as by the kernel's out-of-memory killer): the panel says so,
+    // the host goes on, the scene keeps the last result, and the real worker runs again.
+    BS_CHECK(panel.intraopLabelsSelector()->setCurrentNodeId(QString::fromStdString(intraopLabels->id())));
+    const std::filesystem::path dying = testing::temporaryFolder("BrainDeformationPanelTest") / "dying-worker.sh";
+    {
+      std::ofstream script(dying);
+      script << "#!/bin/sh\necho 'preparing' >&2\nkill -9 $$\n";
+    }
+    std::filesystem::permissions(dying, std::filesystem::perms::owner_all);
+    panel.setWorker(dying);
+    panel.run();
+    BS_CHECK(finished.wait(120000));
+    BS_CHECK(!finished.last().at(0).toBool());
+    std::cout << panel.statusText().toStdString() << '\n';
+    BS_CHECK(panel.statusText().startsWith("Brain deformation failed") && panel.statusText().contains("worker"));
+    BS_CHECK(surface->mesh() == surfaceBefore && !panel.isRunning() && panel.runButton()->isEnabled());
+    panel.setWorker({});
+    panel.run();
+    BS_CHECK(finished.wait(120000));
+    BS_CHECK_MSG(finished.last().at(0).toBool(), panel.statusText().toStdString());
+    BS_CHECK(surface->mesh() != surfaceBefore);
   });
 }
