@@ -4,6 +4,8 @@
 #include <QLabel>
 #include <QVBoxLayout>
 
+#include <algorithm>
+
 namespace brainshift {
 
 ViewLayout::ViewLayout(QWidget* parent)
@@ -102,7 +104,29 @@ void ViewLayout::setCursorPosition(const PhysicalPoint& p)
     if (view->cursorPosition() != p) view->setCursorPosition(p);
   }
   updateReadout();
+  updateSlicePlanes();
   emit cursorMoved(p);
+}
+
+void ViewLayout::updateSlicePlanes()
+{
+  const auto& background = slices_[0]->background();
+  if (!background || !background->image()) return;
+  // The background's extent in LPS mm: the box of its corner voxels' centres.
+  const ScalarImage& image = *background->image();
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  std::array<double, 6> bounds{1e300, -1e300, 1e300, -1e300, 1e300, -1e300};
+  for (int corner = 0; corner < 8; ++corner) {
+    ScalarImage::IndexType index;
+    for (unsigned d = 0; d < 3; ++d) index[d] = (corner >> d) & 1 ? long(size[d]) - 1 : 0;
+    PhysicalPoint x;
+    image.TransformIndexToPhysicalPoint(index, x);
+    for (unsigned d = 0; d < 3; ++d) {
+      bounds[2 * d] = std::min(bounds[2 * d], x[d]);
+      bounds[2 * d + 1] = std::max(bounds[2 * d + 1], x[d]);
+    }
+  }
+  threeD_->setSlicePlanes(cursor_, bounds);
 }
 
 std::vector<LayerValue> ViewLayout::valuesAtCursor() const

@@ -55,6 +55,7 @@ signals:
 
 private:
   void updateReadout();
+  void updateSlicePlanes(); ///< the 3D view's planes through the cursor, across the background
 
   std::array<SliceView*, 3> slices_;
   ThreeDView* threeD_;

@@ -177,7 +177,9 @@ QString HostMainWindow::saveScene(const QString& path)
 
 void HostMainWindow::updateThreeDView()
 {
-  views_->threeDView()->setModels(scene_.nodesOfType<ModelNode>());
+  // Models under transforms (the brain surface under the rigid transform) in the world frame.
+  views_->threeDView()->setModels(scene_.nodesOfType<ModelNode>(),
+                                  [this](const ModelNode& model) { return childToWorldMatrix(scene_, model); });
 }
 
 void HostMainWindow::runFileDialog(const QString& title, const QString& filter, QString (HostMainWindow::*load)(const QString&))
@@ -224,6 +226,15 @@ void HostMainWindow::buildMenus()
     action->setChecked(arrangement == ViewArrangement::FourUp);
     layouts->addAction(action);
   }
+  view->addSeparator();
+  QAction* arrows = view->addAction(tr("Displacement &arrows in 3D"), this,
+                                    [this](bool on) { views_->threeDView()->setDisplacementArrowsVisible(on); });
+  arrows->setCheckable(true);
+  arrows->setObjectName("arrowsAction");
+  QAction* planes = view->addAction(tr("Slice &planes in 3D"), this,
+                                    [this](bool on) { views_->threeDView()->setSlicePlanesVisible(on); });
+  planes->setCheckable(true);
+  planes->setObjectName("slicePlanesAction");
 
   QMenu* help = menuBar()->addMenu(tr("&Help"));
   help->addAction(tr("&Modules..."), this, [this] {
