@@ -7,6 +7,7 @@
 
 #include <array>
 #include <functional>
+#include <string>
 
 class QObject;
 class QWidget;
@@ -15,6 +16,14 @@ namespace brainshift {
 
 class Scene;
 
+/// What the slice views show: node ids of the scene (empty: none) and how the comparison volume
+/// is shown (SliceView.h's ComparisonMode: 0 off, 1 checkerboard, 2 difference, 3 flicker).
+struct ViewLayers {
+  std::string backgroundId, labelMapId, overlayId, comparisonId;
+  int comparisonMode = 0;
+  bool labelOutline = false;
+};
+
 /// What the host offers a panel besides the scene.
 struct ModuleContext {
   /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
@@ -22,6 +31,8 @@ struct ModuleContext {
   /// Calls `onPick` with every point the user picks in a slice view (LPS mm), for as long as
   /// `receiver` lives. May be empty (no views).
   std::function<void(QObject* receiver, std::function<void(const std::array<double, 3>& lps)> onPick)> subscribeToPicks;
+  /// Shows these layers in the slice views (the host's Data panel follows). May be empty (no views).
+  std::function<void(const ViewLayers& layers)> showLayers;
 };
 
 class ModulePlugin {
@@ -35,5 +46,5 @@ public:
 
 } // namespace brainshift
 
-#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.1"
+#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.2"
 Q_DECLARE_INTERFACE(brainshift::ModulePlugin, BrainShiftModulePlugin_iid)

@@ -298,12 +298,17 @@ void SliceView::reslice()
   const float* overlay = scalars(overlaySlice);
   const float* comparison = scalars(comparisonSlice);
 
-  vtkNew<vtkLookupTable> overlayColors; // ColdToHotRainbow: blue through green to red
-  VolumeDisplay overlayDisplay;
+  vtkNew<vtkLookupTable> overlayColors; // ColdToHotRainbow: blue through green to red (statistics);
+  VolumeDisplay overlayDisplay;          // Red: dark red to yellow (angiography)
   if (overlay) {
     overlayDisplay = overlay_->display();
     const auto wl = windowLevelOf(overlayDisplay, overlayRange_);
-    overlayColors->SetHueRange(0.667, 0.0);
+    if (overlayDisplay.colorTable == "Red") {
+      overlayColors->SetHueRange(0.0, 0.17);
+      overlayColors->SetValueRange(0.5, 1.0);
+    } else {
+      overlayColors->SetHueRange(0.667, 0.0);
+    }
     overlayColors->SetTableRange(wl[1] - 0.5 * wl[0], wl[1] + 0.5 * wl[0]);
     overlayColors->Build();
   }

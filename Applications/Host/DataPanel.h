@@ -25,6 +25,7 @@ public:
   NodeSelector* overlaySelector() const { return overlay_; }
   NodeSelector* comparisonSelector() const { return comparison_; }
   QComboBox* comparisonModeBox() const { return comparisonMode_; }
+  QCheckBox* labelOutlineBox() const { return labelOutline_; }
 
 private:
   void showChosenLayers();

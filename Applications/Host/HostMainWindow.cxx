@@ -2,6 +2,7 @@
 
 #include <QAction>
 #include <QActionGroup>
+#include <QCheckBox>
 #include <QComboBox>
 #include <QFileDialog>
 #include <QFileInfo>
@@ -75,6 +76,16 @@ void HostMainWindow::addModules(const QString& modulesFolder)
   };
   context.subscribeToPicks = [this](QObject* receiver, std::function<void(const std::array<double, 3>&)> onPick) {
     connect(views_, &ViewLayout::pointPicked, receiver, [onPick](const PhysicalPoint& p) { onPick({p[0], p[1], p[2]}); });
+  };
+  context.showLayers = [this](const ViewLayers& layers) {
+    // Through the Data panel's selectors, so that it shows what the views show.
+    dataPanel_->backgroundSelector()->setCurrentNodeId(QString::fromStdString(layers.backgroundId));
+    dataPanel_->labelMapSelector()->setCurrentNodeId(QString::fromStdString(layers.labelMapId));
+    dataPanel_->overlaySelector()->setCurrentNodeId(QString::fromStdString(layers.overlayId));
+    dataPanel_->comparisonSelector()->setCurrentNodeId(QString::fromStdString(layers.comparisonId));
+    dataPanel_->comparisonModeBox()->setCurrentIndex(layers.comparisonMode);
+    dataPanel_->labelOutlineBox()->setChecked(layers.labelOutline);
+    views_->updateLayers();
   };
   for (const LoadedModule& module : discovery.modules) {
     const QString title = module.plugin->moduleTitle();

@@ -1,6 +1,7 @@
 // The host finds the modules in the modules folder; a file that is not a plugin, a module whose
 // panel throws and a missing folder are reported, and the host starts all the same.
 #include "BrainShiftTestingSupport.h"
+#include "DataPanel.h"
 #include "HostMainWindow.h"
 
 #include "SyntheticData.h"
@@ -8,6 +9,7 @@
 #include <itkIdentityTransform.h>
 
 #include <QApplication>
+#include <QComboBox>
 #include <QPushButton>
 #include <QTableWidget>
 #include <QFile>
@@ -26,7 +28,8 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
     {
       HostMainWindow host(defaultModulesFolder());
       BS_CHECK_MSG(host.moduleFailures().empty(), host.lastMessage().toStdString());
-      BS_CHECK_MSG(host.moduleTitles() == QStringList({"Data", "Brain deformation", "Evaluation", "Meshing", "Rigid registration", "Tissue classification"}),
+      BS_CHECK_MSG(host.moduleTitles() == QStringList({"Data", "Brain deformation", "Evaluation", "Fusion and review", "Meshing", "Rigid registration",
+                                                            "Tissue classification"}),
                    host.moduleTitles().join(", ").toStdString());
 
       // A module panel reaches the views through the host's context: a click on a landmark's
@@ -55,6 +58,20 @@ int HostModuleDiscoveryTest(int argc, char* argv[])
       emit host.views()->sliceView(SliceOrientation::Coronal)->cursorPicked(testing::point(2, 2, 2));
       BS_CHECK_MSG(counts->text().contains("1 picked"), counts->text().toStdString());
       BS_CHECK(host.views()->cursorPosition() == testing::point(2, 2, 2));
+
+      // The fusion panel sets the views' layers through the host's Data panel.
+      auto intraop = host.scene().add(ScalarVolumeNode::create("intraop image", testing::makeUniformImage({20, 20, 20}, 100.0f)));
+      intraop->setRole("intraop");
+      auto tmap = host.scene().add(ScalarVolumeNode::create("warped fmri", testing::makeUniformImage({20, 20, 20}, 5.0f)));
+      tmap->setRole("overlay");
+      BS_CHECK(host.selectModule("Fusion and review"));
+      // (The plugin has its own copy of the Widgets classes: reach its selector as a QComboBox.)
+      auto* intraopSelector = host.currentPanel()->findChild<QComboBox*>("intraopSelector");
+      BS_CHECK(intraopSelector && intraopSelector->findText("intraop image") >= 0);
+      intraopSelector->setCurrentIndex(intraopSelector->findText("intraop image"));
+      SliceView* axial = host.views()->sliceView(SliceOrientation::Axial);
+      BS_CHECK(axial->background() == intraop && axial->overlay() == tmap);
+      BS_CHECK(host.dataPanel()->overlaySelector()->currentNode() == tmap);
     }
 
     // A folder with the rigid module and a broken one.
