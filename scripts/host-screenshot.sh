@@ -19,5 +19,5 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 "$build/bin/brainshift" demo --output-dir "$work/demo" > "$work/demo.log"
 mkdir -p "$(dirname "$output")"
 xvfb-run -a -s "-screen 0 1400x900x24" \
-  "$build/bin/brainshift-host" --module "Rigid registration" --screenshot "$output" "$work/demo/scene.mrml"
+  "$build/bin/brainshift-host" --module "Fusion and review" --screenshot "$output" "$work/demo/scene.mrml"
 echo "wrote $output"

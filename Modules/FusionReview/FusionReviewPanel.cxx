@@ -9,6 +9,7 @@
 #include <QFormLayout>
 #include <QLabel>
 #include <QSlider>
+#include <QTimer>
 #include <QVBoxLayout>
 
 #include <cmath>
@@ -63,7 +64,12 @@ FusionReviewPanel::FusionReviewPanel(Scene& scene, const ModuleContext& context,
   for (NodeSelector* selector : {intraop_, overlay_, labels_, comparison_}) selector->setScene(&scene_);
   for (const auto& node : scene_.nodes()) chooseByRole(*node);
   sceneObserver_ = scene_.addObserver([this](const SceneEvent& event) {
-    if (event.type == SceneEventType::NodeAdded) chooseByRole(*event.node);
+    // (A loaded scene may give a node its role after adding it.) Once the event is over: the
+    // selectors may hear of a new node after this observer does.
+    if (event.type != SceneEventType::NodeAdded && event.type != SceneEventType::NodeModified) return;
+    QTimer::singleShot(0, this, [this, id = event.node->id()] {
+      if (auto node = scene_.node(id)) chooseByRole(*node);
+    });
   });
   // Every change shows at once: reading is the point of this panel.
   for (NodeSelector* selector : {intraop_, overlay_, labels_, comparison_}) {
@@ -96,10 +102,17 @@ FusionReviewPanel::~FusionReviewPanel()
 
 void FusionReviewPanel::chooseByRole(const Node& node)
 {
-  const QString id = QString::fromStdString(node.id());
-  if (node.kind() == NodeKind::ScalarVolume && node.role() == "intraop") intraop_->setCurrentNodeId(id);
-  if (node.kind() == NodeKind::ScalarVolume && node.role() == "warped") comparison_->setCurrentNodeId(id);
-  if (node.kind() == NodeKind::LabelMapVolume && node.role() == "warped") labels_->setCurrentNodeId(id);
+  // A selector whose choice lacks the role takes the first node that has it.
+  auto offer = [&node](NodeSelector* selector, const std::string& role) {
+    const auto current = selector->currentNode();
+    if (node.role() == role && (!current || current->role() != role)) selector->setCurrentNodeId(QString::fromStdString(node.id()));
+  };
+  if (node.kind() == NodeKind::ScalarVolume) {
+    offer(intraop_, "intraop");
+    offer(comparison_, "warped");
+  } else if (node.kind() == NodeKind::LabelMapVolume) {
+    offer(labels_, "warped");
+  }
 }
 
 void FusionReviewPanel::setOverlayKind(OverlayKind kind) { overlayKind_->setCurrentIndex(int(kind)); }

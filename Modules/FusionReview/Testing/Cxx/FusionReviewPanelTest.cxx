@@ -107,6 +107,21 @@ int FusionReviewPanelTest(int argc, char* argv[])
     BS_CHECK(!axial->labelOutline());
     BS_CHECK(panel.statusText().contains("compared with warped preop image"));
 
+    // A scene loaded after the panel is made (as the host does): the roles still choose.
+    {
+      Scene later;
+      FusionReviewPanel waiting(later, ModuleContext{});
+      auto laterIntraop = later.add(ScalarVolumeNode::create("intraop image", c.intraopImage));
+      laterIntraop->setRole("intraop"); // after adding
+      auto warpedNode = ScalarVolumeNode::create("warped preop image", c.preopImage);
+      warpedNode->setRole("warped"); // before adding, as the scene reader does
+      auto laterWarped = later.add(warpedNode);
+      QCoreApplication::processEvents(); // the panel chooses once the scene's events are over
+      BS_CHECK_MSG(waiting.comparisonSelector()->currentNode() == laterWarped,
+                   waiting.comparisonSelector()->currentNodeId().toStdString());
+      BS_CHECK(waiting.intraopSelector()->currentNode() == laterIntraop);
+    }
+
     // Without views (no context), the panel still keeps the overlay's display.
     FusionReviewPanel alone(scene, ModuleContext{});
     alone.setOverlayThreshold(2.0);
