@@ -12,9 +12,20 @@
 #include <QTimer>
 #include <QVBoxLayout>
 
+#include <algorithm>
 #include <cmath>
 
 namespace brainshift {
+
+namespace {
+double brightestOf(const ScalarVolumeNode& node)
+{
+  if (!node.image()) return 0.0;
+  const float* v = node.image()->GetBufferPointer();
+  const std::size_t n = node.image()->GetLargestPossibleRegion().GetNumberOfPixels();
+  return n ? double(*std::max_element(v, v + n)) : 0.0;
+}
+} // namespace
 
 FusionReviewPanel::FusionReviewPanel(Scene& scene, const ModuleContext& context, QWidget* parent)
   : QWidget(parent)
@@ -79,11 +90,8 @@ FusionReviewPanel::FusionReviewPanel(Scene& scene, const ModuleContext& context,
     // A t-map is read from |t| = 3; an angiogram from a fifth of its range.
     if (OverlayKind(kind) == OverlayKind::Statistics) {
       threshold_->setValue(3.0);
-    } else if (auto node = std::dynamic_pointer_cast<ScalarVolumeNode>(overlay_->currentNode()); node && node->image()) {
-      const float* v = node->image()->GetBufferPointer();
-      float maximum = 0;
-      for (std::size_t i = 0, n = node->image()->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) maximum = std::max(maximum, v[i]);
-      threshold_->setValue(0.2 * double(maximum));
+    } else if (auto node = std::dynamic_pointer_cast<ScalarVolumeNode>(overlay_->currentNode())) {
+      threshold_->setValue(0.2 * brightestOf(*node));
     }
     apply();
   });
@@ -133,13 +141,9 @@ void FusionReviewPanel::apply()
     display.upperThreshold.reset();
     display.opacity = opacity_->value() / 100.0;
     if (!statistics) { // the angiogram's window: its threshold to its brightest
-      float maximum = 0;
-      if (overlay->image()) {
-        const float* v = overlay->image()->GetBufferPointer();
-        for (std::size_t i = 0, n = overlay->image()->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) maximum = std::max(maximum, v[i]);
-      }
-      display.window = std::max(1e-6, double(maximum) - threshold_->value());
-      display.level = 0.5 * (double(maximum) + threshold_->value());
+      const double brightest = brightestOf(*overlay);
+      display.window = std::max(1e-6, brightest - threshold_->value());
+      display.level = 0.5 * (brightest + threshold_->value());
     }
     overlay->setDisplay(display);
   }
