@@ -36,9 +36,10 @@ vtkSmartPointer<vtkMatrix4x4> childToWorldMatrix(const Scene& scene, const Node&
 {
   auto toWorld = vtkSmartPointer<vtkMatrix4x4>::New(); // identity
   std::set<std::string> visited; // a cycle would be a broken scene: stop rather than loop
-  for (std::string id = node.parentTransformId(); !id.empty() && visited.insert(id).second;) {
+  for (std::string id = node.parentTransformId(); !id.empty();) {
+    if (!visited.insert(id).second) return nullptr; // a cycle: a broken scene
     auto transform = std::dynamic_pointer_cast<TransformNode>(scene.node(id));
-    if (!transform) break;
+    if (!transform) return nullptr; // a missing transform: where the model belongs is unknown
     const SpatialTransform* fromParent = transform->transformFromParent();
     if (fromParent) {
       if (!isLinearTransform(fromParent)) return nullptr;
@@ -114,6 +115,8 @@ void ThreeDView::setModels(std::vector<std::shared_ptr<ModelNode>> models, Model
 {
   models_ = std::move(models);
   modelActors_.clear();
+  modelOfActor_.clear();
+  problems_.clear();
   renderer_->RemoveAllViewProps();
   renderer_->AddViewProp(scalarBar_);
   for (vtkActor* plane : planes_) renderer_->AddViewProp(plane);
@@ -125,9 +128,16 @@ void ThreeDView::setModels(std::vector<std::shared_ptr<ModelNode>> models, Model
     auto actor = vtkSmartPointer<vtkActor>::New();
     actor->SetMapper(mapper);
     if (placement) {
-      if (vtkSmartPointer<vtkMatrix4x4> toWorld = placement(*model)) actor->SetUserMatrix(toWorld);
+      vtkSmartPointer<vtkMatrix4x4> toWorld = placement(*model);
+      if (!toWorld) { // drawn in its own frame it would sit in the wrong place: not drawn, said
+        problems_.push_back(QString::fromStdString("the model '" + model->name() +
+                                                   "' is not shown: a transform it is placed under is missing or not linear"));
+        continue;
+      }
+      actor->SetUserMatrix(toWorld);
     }
     modelActors_.push_back(actor);
+    modelOfActor_.push_back(model);
     const ModelDisplay& display = model->display();
     actor->GetProperty()->SetColor(display.color[0], display.color[1], display.color[2]);
     actor->GetProperty()->SetOpacity(display.opacity);
@@ -179,13 +189,13 @@ void ThreeDView::updateArrows()
   arrowActors_.clear();
   arrowCount_ = 0;
   if (!arrowsVisible_) return;
-  for (std::size_t m = 0; m < models_.size() && m < modelActors_.size(); ++m) {
-    const ModelNode& model = *models_[m];
+  for (std::size_t m = 0; m < modelActors_.size(); ++m) {
+    const ModelNode& model = *modelOfActor_[m];
     vtkDataArray* displacement = model.mesh()->GetPointData()->GetArray("Displacement");
     if (!model.display().scalarVisibility || !displacement || displacement->GetNumberOfComponents() != 3) continue;
     // At most about 2,000 arrows, every k-th point: a readable field, not a carpet.
     const vtkIdType n = model.mesh()->GetNumberOfPoints();
-    const vtkIdType stride = std::max<vtkIdType>(1, n / 2000);
+    const vtkIdType stride = std::max<vtkIdType>(1, (n + 1999) / 2000);
     vtkNew<vtkPoints> starts;
     vtkNew<vtkDoubleArray> vectors;
     vectors->SetNumberOfComponents(3);

@@ -9,6 +9,7 @@
 #include "ModelNode.h"
 #include "Scene.h"
 
+#include <QStringList>
 #include <QVTKOpenGLNativeWidget.h>
 #include <vtkSmartPointer.h>
 
@@ -38,11 +39,13 @@ public:
   /// by default) and gets the bar.
   void setModels(std::vector<std::shared_ptr<ModelNode>> models, ModelPlacement placement = {});
   const std::vector<std::shared_ptr<ModelNode>>& models() const { return models_; }
-  /// The actor of the i-th model shown (tests read its bounds), or null.
+  /// The actor of the i-th model drawn (tests read its bounds), or null.
   vtkActor* modelActor(std::size_t i) const;
+  /// Why models were not drawn (a transform above them missing or not linear), from the last setModels.
+  const QStringList& problems() const { return problems_; }
 
   /// Arrows from the initial to the final position of the points of every coloured model with a
-  /// 3-component `Displacement` array (at most about 2,000 per model, spread over it).
+  /// 3-component `Displacement` array (at most 2,000 per model, every k-th point).
   void setDisplacementArrowsVisible(bool visible);
   bool displacementArrowsVisible() const { return arrowsVisible_; }
   /// How many arrows are drawn now (0 while hidden).
@@ -65,6 +68,8 @@ private:
 
   std::vector<std::shared_ptr<ModelNode>> models_;
   std::vector<vtkSmartPointer<vtkActor>> modelActors_, arrowActors_;
+  std::vector<std::shared_ptr<ModelNode>> modelOfActor_; ///< the model each drawn actor shows
+  QStringList problems_;
   vtkRenderer* renderer_;
   vtkScalarBarActor* scalarBar_;
   std::array<vtkActor*, 3> planes_{};
@@ -78,7 +83,7 @@ std::string colouringArrayOf(const ModelNode& model);
 /// The matrix that takes `node`'s points from its frame to the scene's world frame, through the
 /// transforms it is placed under (each transform node's transformFromParent maps its parent frame
 /// to its child frame, so the way up is its inverse). Null when a transform on the way is not
-/// linear (a displacement field: not drawn through).
+/// linear (a displacement field), or missing: such a model is not drawn (ThreeDView::problems).
 vtkSmartPointer<vtkMatrix4x4> childToWorldMatrix(const Scene& scene, const Node& node);
 
 } // namespace brainshift

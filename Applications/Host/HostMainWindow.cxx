@@ -191,6 +191,7 @@ void HostMainWindow::updateThreeDView()
   // Models under transforms (the brain surface under the rigid transform) in the world frame.
   views_->threeDView()->setModels(scene_.nodesOfType<ModelNode>(),
                                   [this](const ModelNode& model) { return childToWorldMatrix(scene_, model); });
+  if (!views_->threeDView()->problems().isEmpty()) statusBar()->showMessage(views_->threeDView()->problems().join("; "));
 }
 
 void HostMainWindow::runFileDialog(const QString& title, const QString& filter, QString (HostMainWindow::*load)(const QString&))

@@ -80,6 +80,10 @@ int ThreeDViewPlacementTest(int argc, char* argv[])
     warped->setParentTransformId(warp->id());
     scene.add(warped);
     BS_CHECK(!childToWorldMatrix(scene, *warped));
+    auto orphan = ModelNode::create("orphan model", testing::makeTetrahedronSurface());
+    orphan->setParentTransformId("vtkMRMLLinearTransformNode404"); // a transform the scene lacks
+    scene.add(orphan);
+    BS_CHECK(!childToWorldMatrix(scene, *orphan));
 
     ThreeDView view;
     view.resize(300, 300);
@@ -92,6 +96,10 @@ int ThreeDViewPlacementTest(int argc, char* argv[])
               << ".." << bounds[5] << '\n';
     BS_CHECK(bounds[0] <= expected[0] + 1e-6 && expected[0] <= bounds[1] + 1e-6);
     BS_CHECK(bounds[2] <= expected[1] + 1e-6 && expected[1] <= bounds[3] + 1e-6);
+    // A model that cannot be placed is not drawn (not drawn in the wrong frame), and said.
+    view.setModels({warped, surface}, [&scene](const ModelNode& model) { return childToWorldMatrix(scene, model); });
+    BS_CHECK(view.modelActor(0) && !view.modelActor(1));
+    BS_CHECK(view.problems().size() == 1 && view.problems().front().contains("warped model"));
     // Without placement, where the data are.
     view.setModels({surface});
     view.modelActor(0)->GetBounds(bounds);
