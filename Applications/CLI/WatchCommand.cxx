@@ -90,6 +90,17 @@ void runWatch(const WatchOptions& o)
   if (!(o.pollSeconds > 0 && o.pollSeconds <= 60)) throw InputError("--poll-seconds must be within 0 and 60");
   const Configuration configuration = configurationFor(o.run);
   std::error_code ec;
+  const fs::path summaryFile = o.run.outputDir / "watch.json";
+  if (fs::exists(summaryFile, ec)) { // an earlier session's scans: kept unless told otherwise
+    if (!o.run.overwrite) {
+      throw InputError(o.run.outputDir.string() + ": holds an earlier watch session (watch.json); choose another --output-dir, "
+                       "or pass --overwrite to replace its scans");
+    }
+    for (const auto& entry : fs::directory_iterator(o.run.outputDir, ec)) {
+      if (entry.is_directory(ec) && entry.path().filename().string().rfind("scan-", 0) == 0) fs::remove_all(entry.path(), ec);
+    }
+    fs::remove(summaryFile, ec);
+  }
   fs::create_directories(o.run.outputDir, ec);
   if (ec) throw InputError(o.run.outputDir.string() + ": cannot create the output folder (" + ec.message() + ")");
   std::unique_ptr<FolderWatcher> watcher;
@@ -99,7 +110,6 @@ void runWatch(const WatchOptions& o)
   nlohmann::json summary = {{"preop_image", fs::absolute(o.run.preopImage).string()},
                             {"preop_labels", fs::absolute(o.run.preopLabels).string()},
                             {"scans", nlohmann::json::array()}};
-  const fs::path summaryFile = o.run.outputDir / "watch.json";
   fs::path previous;
   std::size_t failures = 0;
   std::size_t listed = 0;
@@ -120,7 +130,7 @@ void runWatch(const WatchOptions& o)
     run.intraopImage = image;
     run.outputDir = o.run.outputDir / folderName;
     run.previous = previous;
-    run.overwrite = true; // the session's own folders
+    run.overwrite = true; // the session's own folders (an earlier session's were removed above)
     fs::create_directories(run.outputDir, ec);
     std::printf("== scan %u: %s -> %s\n", number, image.string().c_str(), run.outputDir.string().c_str());
     std::fflush(stdout);
@@ -174,6 +184,7 @@ void addWatchCommand(CLI::App& app)
   command->add_option("--watch-dir", o->watchFolder, "a folder the scanner writes images into; each new one is registered");
   command->add_option("--max-scans", o->maximumScans, "stop after this many scans (default: all listed, or never)");
   command->add_option("--poll-seconds", o->pollSeconds, "how often --watch-dir is looked at")->capture_default_str();
+  command->add_flag("--overwrite", o->run.overwrite, "replace an earlier watch session's scans in --output-dir");
   command->callback([o] { runWatch(*o); });
 }
 

@@ -5,6 +5,7 @@
 #include "TransformIO.h"
 
 #include <itkEuler3DTransform.h>
+#include <itkImageRegionIteratorWithIndex.h>
 #include <vtkPolyData.h>
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
@@ -28,6 +29,20 @@ template <class TImage>
 typename TImage::Pointer makeImage(const ImageGeometry& geometry)
 {
   return geometry.allocate<TImage>();
+}
+
+/// An image on `geometry` whose voxel at physical point p holds `value(p)`.
+template <class TImage, class Value>
+typename TImage::Pointer imageOn(const ImageGeometry& geometry, Value value)
+{
+  auto image = geometry.allocate<TImage>();
+  itk::ImageRegionIteratorWithIndex<TImage> it(image, image->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint p;
+    image->TransformIndexToPhysicalPoint(it.GetIndex(), p);
+    it.Set(value(p));
+  }
+  return image;
 }
 
 /// An image of `size` voxels of 1 mm at the origin, axis-aligned, every voxel `value`.

@@ -212,6 +212,10 @@ WatchSession)
   [ "$(json_value "$out/folder/watch.json" "['scans'][1]['intraop_image']")" = "$out/scanner/b.nii.gz" ] ||
     fail "the folder's second image was not the second scan"
   [ -s "$out/folder/scan-02/intraop_to_preop.h5" ] || fail "the folder's second scan wrote no transform"
+  # An earlier session's folder is refused (its scans kept) unless --overwrite.
+  expect 2 "holds an earlier watch session" -- "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/folder" --scans "$case_dir/intraop_image.nii.gz"
+  [ -s "$out/folder/scan-02/intraop_to_preop.h5" ] || fail "a refused watch touched the earlier session's scans"
   expect 2 "either --scans or --watch-dir" -- "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \
     --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$out/none"
   expect 2 "--watch-dir is not a folder" -- "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \

@@ -13,22 +13,7 @@
 
 #include <cmath>
 
-namespace {
 using namespace brainshift;
-
-template <class TImage, class Value>
-typename TImage::Pointer imageOn(const ImageGeometry& grid, Value value)
-{
-  auto image = grid.allocate<TImage>();
-  itk::ImageRegionIteratorWithIndex<TImage> it(image, image->GetLargestPossibleRegion());
-  for (; !it.IsAtEnd(); ++it) {
-    PhysicalPoint p;
-    image->TransformIndexToPhysicalPoint(it.GetIndex(), p);
-    it.Set(value(p));
-  }
-  return image;
-}
-} // namespace
 
 int SliceViewRenderingTest(int argc, char* argv[])
 {
@@ -40,15 +25,15 @@ int SliceViewRenderingTest(int argc, char* argv[])
     // a hot blob on the left and a cold one on the right, |t| < 3 elsewhere.
     const ImageGeometry grid = testing::grid({64, 64, 16}, {2.0, 2.0, 4.0}, point(-63, -63, -30));
     auto radius = [](const PhysicalPoint& p) { return std::hypot(p[0], 1.2 * p[1]); };
-    auto anatomy = ScalarVolumeNode::create("T1", imageOn<ScalarImage>(grid, [&](const PhysicalPoint& p) {
+    auto anatomy = ScalarVolumeNode::create("T1", testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& p) {
       const double r = radius(p);
       return float(r > 60 ? 0 : r > 50 ? 300 : r < 12 ? 80 : 200 + 40 * std::sin(p[0] / 6.0) * std::cos(p[1] / 7.0));
     }));
-    auto labels = LabelMapVolumeNode::create("labels", imageOn<LabelImage>(grid, [&](const PhysicalPoint& p) {
+    auto labels = LabelMapVolumeNode::create("labels", testing::imageOn<LabelImage>(grid, [&](const PhysicalPoint& p) {
       const double r = radius(p);
       return LabelPixel(r > 60 ? 0 : r > 50 ? 1 : r < 12 ? 3 : 2);
     }));
-    auto statistics = ScalarVolumeNode::create("fMRI", imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) {
+    auto statistics = ScalarVolumeNode::create("fMRI", testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) {
       const double hot = 8 * std::exp(-(std::pow(p[0] - 25, 2) + std::pow(p[1] + 10, 2)) / 200.0);
       const double cold = -6 * std::exp(-(std::pow(p[0] + 28, 2) + std::pow(p[1] - 15, 2)) / 150.0);
       return float(hot + cold + 0.5);

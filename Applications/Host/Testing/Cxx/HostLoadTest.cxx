@@ -24,19 +24,6 @@ QString q(const std::filesystem::path& p)
 {
   return QString::fromStdString(p.string());
 }
-
-template <class TImage, class Value>
-typename TImage::Pointer imageOn(const ImageGeometry& grid, Value value)
-{
-  auto image = grid.allocate<TImage>();
-  itk::ImageRegionIteratorWithIndex<TImage> it(image, image->GetLargestPossibleRegion());
-  for (; !it.IsAtEnd(); ++it) {
-    PhysicalPoint p;
-    image->TransformIndexToPhysicalPoint(it.GetIndex(), p);
-    it.Set(value(p));
-  }
-  return image;
-}
 } // namespace
 
 int HostLoadTest(int argc, char* argv[])
@@ -48,11 +35,11 @@ int HostLoadTest(int argc, char* argv[])
     registerIOFactories();
     const auto folder = testing::temporaryFolder("HostLoadTest");
     const ImageGeometry grid = testing::grid({24, 20, 16}, {1.0, 1.0, 2.0}, point(-10, -8, -12));
-    writeScalarVolume(imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(50 + p[0]); }), folder / "t1.nii.gz");
-    writeLabelVolume(imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(p[1] < 0 ? 2 : 0); }), folder / "labels.nii.gz");
+    writeScalarVolume(testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(50 + p[0]); }), folder / "t1.nii.gz");
+    writeLabelVolume(testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(p[1] < 0 ? 2 : 0); }), folder / "labels.nii.gz");
     const ImageGeometry otherGrid = testing::grid({12, 10, 8}, {2.0, 2.0, 4.0}, point(-10, -8, -12));
-    writeLabelVolume(imageOn<LabelImage>(otherGrid, [](const PhysicalPoint&) { return LabelPixel(2); }), folder / "coarse_labels.nii.gz");
-    writeScalarVolume(imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(p[2] > 0 ? 6 : -6); }), folder / "tmap.nrrd");
+    writeLabelVolume(testing::imageOn<LabelImage>(otherGrid, [](const PhysicalPoint&) { return LabelPixel(2); }), folder / "coarse_labels.nii.gz");
+    writeScalarVolume(testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(p[2] > 0 ? 6 : -6); }), folder / "tmap.nrrd");
     std::ofstream(folder / "notes.nii.gz") << "surgical notes, not an image\n";
 
     HostMainWindow host(QString::fromStdString((folder / "no-modules").string()));
