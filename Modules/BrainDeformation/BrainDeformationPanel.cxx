@@ -25,7 +25,7 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
   ranks_ = new QSpinBox(this);
   ranks_->setRange(1, 64);
-  ranks_->setValue(1);
+  ranks_->setValue(Configuration{}.ranks); // the product default, as the command line
   ranks_->setToolTip(tr("MPI ranks of the finite element solve"));
   controls_ = new StageRunControls(tr("Brain deformation"), this);
   boardReader_ = new QTimer(this);
