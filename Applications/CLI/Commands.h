@@ -22,6 +22,7 @@ struct RunOptions {
   std::vector<double> meshRegionOfInterest; ///< x, y, z (LPS mm), radius mm; empty: the configuration's
   std::optional<std::string> solverOptions;
   std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
+  std::optional<std::string> tumourResected; ///< "yes", "no" or "auto" (the configuration's otherwise)
   /// An earlier scan's output folder of the same case (register --previous): its rigid transform
   /// starts the registration, its prototypes classify, its mesh and preoperative surface fit are reused.
   std::filesystem::path previous;

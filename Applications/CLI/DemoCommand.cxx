@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <set>
 
 namespace brainshift::cli {
 namespace fs = std::filesystem;
@@ -31,23 +32,34 @@ struct DemoOptions {
   std::vector<double> rotation{4.0, -3.0, 6.0};
   std::vector<double> translation{6.0, -8.0, 5.0};
   double noise = 0.03, bias = 0.2;
+  std::string scenario = "default";
+  std::string contrast = "t1", tumour = "rim-enhancing", gap = "dark";
+  bool cavityRim = false;
+  /// The options given on the command line (they override the scenario's values).
+  std::set<std::string> given;
 };
 
+/// The scenario's parameters with the options given on the command line over them.
 CaseParameters caseParametersOf(const DemoOptions& o)
 {
-  CaseParameters p;
+  CaseParameters p = caseScenario(o.scenario).parameters;
   if (o.size != "full" && o.size != "small") throw InputError("--size: '" + o.size + "' is neither full nor small");
   p.size = o.size == "full" ? CaseSize::Full : CaseSize::Small;
-  p.seed = o.seed;
-  p.shiftMillimetres = o.shift;
-  p.craniotomy = craniotomySiteFromString(o.craniotomy);
-  p.resection = !o.noResection;
+  auto given = [&](const char* option) { return o.given.count(option) > 0; };
+  if (given("--seed")) p.seed = o.seed;
+  if (given("--shift")) p.shiftMillimetres = o.shift;
+  if (given("--craniotomy")) p.craniotomy = craniotomySiteFromString(o.craniotomy);
+  if (given("--no-resection")) p.resection = !o.noResection;
   for (int i = 0; i < 3; ++i) {
-    p.rotationDegrees[i] = o.rotation[i];
-    p.translationMillimetres[i] = o.translation[i];
+    if (given("--rotation")) p.rotationDegrees[i] = o.rotation[i];
+    if (given("--translation")) p.translationMillimetres[i] = o.translation[i];
   }
-  p.noiseFraction = o.noise;
-  p.biasStrength = o.bias;
+  if (given("--noise")) p.noiseFraction = o.noise;
+  if (given("--bias")) p.biasStrength = o.bias;
+  if (given("--contrast")) p.contrast = intraopContrastFromString(o.contrast);
+  if (given("--tumour")) p.tumourAppearance = tumourAppearanceFromString(o.tumour);
+  if (given("--gap")) p.gap = gapContentFromString(o.gap);
+  if (given("--cavity-rim")) p.cavityRim = o.cavityRim;
   p.validate();
   return p;
 }
@@ -110,13 +122,26 @@ void addDemoCommand(CLI::App& app)
   command->add_option("--translation", options->translation, "head translation in the scanner, LPS mm")->capture_default_str()->expected(3);
   command->add_option("--noise", options->noise, "Rician noise sigma as a fraction of white matter")->capture_default_str();
   command->add_option("--bias", options->bias, "bias field strength (log amplitude)")->capture_default_str();
+  std::string scenarioNames;
+  for (const CaseScenario& scenario : caseScenarios()) scenarioNames += (scenarioNames.empty() ? "" : ", ") + scenario.name;
+  command->add_option("--scenario", options->scenario,
+                      "a named variant of the case (the options above and below override its values): " + scenarioNames)
+    ->capture_default_str();
+  command->add_option("--contrast", options->contrast, "intraoperative contrast: t1, low-field-t1, t2 or flair")->capture_default_str();
+  command->add_option("--tumour", options->tumour, "tumour look: rim-enhancing, hypointense or nearly-isointense")->capture_default_str();
+  command->add_option("--gap", options->gap, "what fills the gap under the craniotomy: dark or fluid-and-air")->capture_default_str();
+  command->add_flag("--cavity-rim", options->cavityRim, "a bright rim of blood products on the resection cavity's wall");
   command->add_option("--config", options->run.config, "JSON configuration for register");
   command->add_option("--mesh-resolution", options->run.meshResolutionMm, "for register: tetrahedron edge length, mm");
   command->add_option("--mesh-grading", options->run.meshGrading, "for register: mesh grading (0: uniform)");
   command->add_option("--ranks", options->run.ranks, "for register: MPI ranks of the finite element worker");
   command->add_option("--solver-options", options->run.solverOptions, "for register: PETSc options");
 
-  command->callback([options] {
+  command->callback([command, options] {
+    for (const char* name : {"--seed", "--shift", "--craniotomy", "--no-resection", "--rotation", "--translation", "--noise",
+                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim"}) {
+      if (command->count(name) > 0) options->given.insert(name);
+    }
     const CaseParameters parameters = caseParametersOf(*options);
     const Configuration configuration = configurationFor(options->run);
     const fs::path out = options->run.outputDir;
@@ -131,9 +156,10 @@ void addDemoCommand(CLI::App& app)
     }
 
     Stopwatch caseClock;
-    std::printf("building the built-in case (%s, seed %llu, shift %.1f mm, %s craniotomy%s) ...\n", options->size.c_str(),
-                static_cast<unsigned long long>(parameters.seed), parameters.shiftMillimetres,
-                toString(parameters.craniotomy).c_str(), parameters.resection ? ", resection" : "");
+    std::printf("building the built-in case, scenario %s (%s, seed %llu, shift %.1f mm, %s craniotomy%s, %s contrast, %s gap) ...\n",
+                options->scenario.c_str(), options->size.c_str(), static_cast<unsigned long long>(parameters.seed),
+                parameters.shiftMillimetres, toString(parameters.craniotomy).c_str(), parameters.resection ? ", resection" : "",
+                toString(parameters.contrast).c_str(), toString(parameters.gap).c_str());
     std::fflush(stdout);
     const SimulatedCase simulated = simulateCase(parameters);
     const CaseFiles files(out / "case");
@@ -149,6 +175,7 @@ void addDemoCommand(CLI::App& app)
                         {"case_seconds", caseSeconds},
                         {"size", options->size},
                         {"seed", parameters.seed},
+                        {"scenario", options->scenario},
                         {"shift_mm", parameters.shiftMillimetres}});
     RunOptions run = options->run;
     run.preopImage = files.preopImage;

@@ -33,6 +33,9 @@ void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInpu
     command->add_option("--prototypes", options.prototypes,
                         "classification prototypes: a previous scan's classification_prototypes.json, or a .mrk.json of "
                         "points named by tissue (parenchyma-1, ventricles-2, ...); default: chosen automatically");
+    command->add_option("--tumour-resected", options.tumourResected,
+                        "yes, no or auto: whether the tumour has been resected (auto: decided from the image where the "
+                        "aligned tumour lies; the default)");
   }
   if (meshFlags) {
     command->add_option("--mesh-resolution", options.meshResolutionMm, "target tetrahedron edge length in mm (default 4)");
@@ -67,6 +70,7 @@ Configuration configurationFor(const RunOptions& options)
   }
   if (options.solverOptions) configuration.solverOptions = *options.solverOptions;
   if (options.ranks) configuration.ranks = *options.ranks;
+  if (options.tumourResected) configuration.classificationTumourResected = *options.tumourResected;
   configuration.validate(options.config.empty() ? "command line" : "command line and " + options.config.string());
   return configuration;
 }
@@ -268,6 +272,9 @@ const std::vector<PipelineStage>& pipelineStages()
                 "(writes brain_surface.vtp)", runSurfaceStage},
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
      runSimulateStage},
+    {"refine", "the classification follows the brain: the preoperative labels warped by the solve become the spatial prior, "
+               "and classify, surface and simulate run again until the brain boundary settles (rewrites their files)",
+     runRefineStage},
     {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "
              "displacement_intraop_to_preop.nrrd, warped_*.nii.gz, scene.mrml)", runWarpStage},
   };

@@ -67,6 +67,12 @@ public:
   /// simulate stage solves with its served worker.
   void joinSession(SerialScanSession& session) { session_ = &session; }
   SerialScanSession* session() const { return session_; }
+  /// The refine stage's spatial prior: the preoperative labels warped onto the intraoperative grid
+  /// by the last solve (classify then uses them with the identity instead of the preoperative labels
+  /// through the rigid transform, and surface reuses the preoperative boundary it found); null: none.
+  void setWarpedPrior(LabelImage::Pointer labels, int pass) { warpedPrior_ = std::move(labels); warpedPriorPass_ = pass; }
+  const LabelImage* warpedPrior() const { return warpedPrior_.GetPointer(); }
+  int warpedPriorPass() const { return warpedPriorPass_; }
 
 private:
   RunOptions options_;
@@ -78,6 +84,8 @@ private:
   std::optional<std::vector<LoadedOverlay>> overlays_;
   nlohmann::json previousReport_;
   SerialScanSession* session_ = nullptr;
+  LabelImage::Pointer warpedPrior_;
+  int warpedPriorPass_ = 0;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
@@ -115,5 +123,6 @@ void runSimulateStage(RunContext& context);
 void runMeshStage(RunContext& context);
 void runSurfaceStage(RunContext& context);
 void runWarpStage(RunContext& context);
+void runRefineStage(RunContext& context); ///< RefineStage.cxx
 
 } // namespace brainshift::cli

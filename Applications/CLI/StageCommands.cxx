@@ -43,6 +43,7 @@ StageFlags flagsOf(const std::string& stage)
   if (stage == "mesh") return {PreopLabels, PreopLabels, false, true};
   if (stage == "surface") return {PreopLabels | IntraopImage, PreopLabels | IntraopImage, false, false};
   if (stage == "simulate") return {0, 0, true, false};
+  if (stage == "refine") return {PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage, true, false};
   return {PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays, false, false};
 }
 } // namespace
@@ -71,7 +72,8 @@ void addStageCommands(CLI::App& app)
     auto options = std::make_shared<RunOptions>();
     CLI::App* command = app.add_subcommand(stage.name, "Stage alone: " + stage.summary);
     const StageFlags flags = flagsOf(stage.name);
-    addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh, stage.name == "classify");
+    addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh,
+                  stage.name == "classify" || stage.name == "refine");
     command->callback([options, stage] {
       const Configuration configuration = configurationFor(*options);
       checkGivenInputs(*options);

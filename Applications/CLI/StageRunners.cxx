@@ -8,6 +8,7 @@
 #include "VolumeNodes.h"
 
 #include <itkCompositeTransform.h>
+#include <itkIdentityTransform.h>
 
 #include <tuple>
 #include <type_traits>
@@ -92,6 +93,20 @@ void runRigidStage(RunContext& context)
 
 namespace brainshift::cli {
 
+namespace {
+nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
+{
+  if (e.decidedBy.empty()) return nullptr;
+  auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  return {{"decided_by", e.decidedBy},
+          {"tumour_median", finite(e.tumourMedian)},
+          {"fluid_median", finite(e.fluidMedian)},
+          {"parenchyma_median", finite(e.parenchymaMedian)},
+          {"intraop_relative", finite(e.intraopRelative)},
+          {"preop_relative", finite(e.preopRelative)}};
+}
+} // namespace
+
 void runClassifyStage(RunContext& context)
 {
   Stopwatch clock;
@@ -126,12 +141,21 @@ void runClassifyStage(RunContext& context)
   parameters.saturationMm = configuration.classificationSaturationMm;
   parameters.biasCorrection = configuration.classificationBiasCorrection;
   parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
-  if (SerialScanSession* session = context.session()) { // the preoperative maps once per session
+  parameters.tumourResection = tumourResectionFromString(configuration.classificationTumourResected);
+  if (!context.options().preopImage.empty()) {
+    parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
+  }
+  // The spatial prior: the preoperative labels through the rigid transform, or (refine) the
+  // preoperative labels warped by the last solve, already on the intraoperative grid.
+  const LabelImage* prior = context.warpedPrior();
+  const auto identity = itk::IdentityTransform<double, 3>::New();
+  if (SerialScanSession* session = context.session(); session && !prior) { // the preoperative maps once per session
     if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
     parameters.preoperativeMaps = session->tissueMaps;
   }
-  const TissueClassificationResult result = classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"),
-                                                            *rigid, prototypes, parameters);
+  const TissueClassificationResult result =
+    prior ? classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters)
+          : classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"), *rigid, prototypes, parameters);
   writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
   // Recorded for the next scan of the same case (intraoperative scanner frame).
   writePrototypes(result.prototypes, context.output("classification_prototypes.json"));
@@ -150,6 +174,9 @@ void runClassifyStage(RunContext& context)
                                          {"prototypes_from", prototypesFile ? prototypesFile->string() : std::string()},
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
+                                         {"tumour_evidence", tumourEvidenceJson(result.tumourEvidence)},
+                                         {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
+                                                         : std::string("preoperative labels through the rigid transform")},
                                          {"feature_seconds", result.featureSeconds},
                                          {"knn_seconds", result.knnSeconds},
                                          {"knn_queries", result.knnQueries},
@@ -359,8 +386,10 @@ void runSurfaceStage(RunContext& context)
   names.preopLabels = context.options().preopLabels.string();
   // A later scan on the same mesh reuses the preoperative boundary the previous scan found.
   vtkSmartPointer<vtkPolyData> previousSurface;
-  const std::optional<fs::path> previousSurfaceFile = context.previousFile("brain_surface.vtp");
-  if (previousSurfaceFile && context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")) {
+  std::optional<fs::path> previousSurfaceFile = context.previousFile("brain_surface.vtp");
+  const bool samePass = context.warpedPrior() != nullptr; // refine: this scan's own surface, same mesh
+  if (samePass) previousSurfaceFile = context.output("brain_surface.vtp");
+  if (previousSurfaceFile && (samePass || (context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")))) {
     previousSurface = vtkPolyData::SafeDownCast(readModel(*previousSurfaceFile));
     if (!previousSurface) throw InputError(previousSurfaceFile->string() + ": not a surface (vtkPolyData)");
     if (!previousSurface->GetPointData()->GetArray("PreopBoundary")) previousSurface = nullptr; // an older run's: fit again

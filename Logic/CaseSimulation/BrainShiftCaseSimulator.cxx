@@ -19,6 +19,7 @@
 #include <map>
 #include <cmath>
 #include <numeric>
+#include <limits>
 #include <random>
 
 namespace brainshift {
@@ -327,6 +328,100 @@ std::vector<Vec3> pickSeparated(std::vector<Vec3> candidates, std::size_t count,
   return chosen;
 }
 
+/// The intraoperative scanner's contrast: a map of the white-matter-normalised preoperative T1
+/// intensity v. T1 is a gamma of 0.85 (the built-in case as it always was); the others are
+/// piecewise linear through the tissue means (air 0, CSF c, grey g, white 1, fat and scalp 2), with
+/// values after published relative signal intensities at those field strengths and weightings.
+class IntensityMap {
+public:
+  IntensityMap() = default;
+  IntensityMap(std::vector<double> from, std::vector<double> to) : from_(std::move(from)), to_(std::move(to)) {}
+  double operator()(double v) const
+  {
+    if (from_.empty()) return std::pow(v, 0.85);
+    if (v <= from_.front()) return to_.front();
+    for (std::size_t k = 1; k < from_.size(); ++k) {
+      if (v <= from_[k] || k + 1 == from_.size()) {
+        const double t = (v - from_[k - 1]) / (from_[k] - from_[k - 1]);
+        return std::max(0.0, to_[k - 1] + t * (to_[k] - to_[k - 1]));
+      }
+    }
+    return to_.back();
+  }
+
+private:
+  std::vector<double> from_, to_;
+};
+
+IntensityMap intraopContrastMap(IntraopContrast contrast, double csf, double grey)
+{
+  const std::vector<double> anchors{0.0, csf, grey, 1.0, 2.0};
+  switch (contrast) {
+  case IntraopContrast::T1: return {};
+  case IntraopContrast::LowFieldT1: return {anchors, {0.0, 0.55, 0.80, 0.92, 1.30}};
+  case IntraopContrast::T2: return {anchors, {0.0, 1.00, 0.55, 0.42, 0.70}};
+  case IntraopContrast::Flair: return {anchors, {0.0, 0.12, 0.80, 0.62, 0.70}};
+  }
+  return {};
+}
+
+/// What a voxel of the preoperative brain holds in the deformed configuration.
+enum Matter : unsigned char { Outside = 0, Tissue, Gap, Cavity };
+
+/// The "up" of the patient on the table: the craniotomy axis tilted towards the posterior.
+Vec3 upwardDirection(const Vec3& axis, double tiltDegrees)
+{
+  Vec3 towards{0, 1, 0};
+  if (std::abs(dot(towards, axis)) > 0.9) towards = {0, 0, 1};
+  const Vec3 perpendicular = normalized(towards - dot(towards, axis) * axis);
+  const double t = tiltDegrees * M_PI / 180.0;
+  return normalized(std::cos(t) * axis + std::sin(t) * perpendicular);
+}
+
+/// The height (along `up`) below which `fraction` of the voxels of one matter lie.
+double fluidLevel(const Grid& g, const std::vector<unsigned char>& matter, Matter which, const Vec3& up, double fraction)
+{
+  std::vector<double> heights;
+  for (std::size_t i = 0; i < matter.size(); ++i) {
+    if (matter[i] == which) heights.push_back(dot(g.pointOf(i), up));
+  }
+  if (heights.empty()) return 0;
+  const std::size_t at = std::min(heights.size() - 1, std::size_t(fraction * double(heights.size())));
+  std::nth_element(heights.begin(), heights.begin() + std::ptrdiff_t(at), heights.end());
+  return fraction >= 1.0 ? std::numeric_limits<double>::infinity() : heights[at];
+}
+
+/// The intensities of the intraoperative-only matter in the deformed image: the gap (one dark
+/// value, or CSF-like fluid under air with a level set by gravity) and the resection cavity (fluid,
+/// air above its own level, and a bright rim of blood products on its wall when asked).
+void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3& axis, double csfMean, double whiteMean,
+                              const std::vector<unsigned char>& matter, float* image, CaseFigures& figures)
+{
+  const bool fluidAndAir = P.gap == GapContent::FluidAndAir;
+  const Vec3 up = upwardDirection(axis, P.gravityTiltDegrees);
+  const double gapLevel = fluidAndAir ? fluidLevel(G, matter, Gap, up, P.gapFluidFraction) : 0.0;
+  const double cavityLevel = fluidAndAir ? fluidLevel(G, matter, Cavity, up, P.cavityFluidFraction) : 0.0;
+  const double voxelMl = G.spacing[0] * G.spacing[1] * G.spacing[2] / 1000.0;
+  ScalarImage::Pointer toCavityWall;
+  if (P.cavityRim) {
+    auto cavity = newImage<MaskImage>(G, 0);
+    for (std::size_t i = 0; i < matter.size(); ++i) cavity->GetBufferPointer()[i] = matter[i] == Cavity;
+    toCavityWall = signedDistanceMm(cavity);
+  }
+  for (std::size_t i = 0; i < matter.size(); ++i) {
+    if (matter[i] == Gap) {
+      const bool air = fluidAndAir && dot(G.pointOf(i), up) > gapLevel;
+      image[i] = fluidAndAir ? (air ? 0.0f : float(csfMean)) : float(0.6 * csfMean);
+      if (air) figures.gapAirMl += voxelMl;
+    } else if (matter[i] == Cavity) {
+      const bool air = fluidAndAir && dot(G.pointOf(i), up) > cavityLevel;
+      image[i] = air ? 0.0f : float(csfMean);
+      if (air) figures.cavityAirMl += voxelMl;
+      if (!air && toCavityWall && toCavityWall->GetBufferPointer()[i] >= -1.5f) image[i] = float(1.25 * whiteMean);
+    }
+  }
+}
+
 } // namespace
 
 // ---- Parameters ---------------------------------------------------------------------------
@@ -352,6 +447,62 @@ CraniotomySite craniotomySiteFromString(const std::string& text)
                    "' is not a site (right-frontal, left-frontal, right-parietal, left-parietal, vertex)");
 }
 
+namespace {
+template <class TEnum>
+TEnum enumFromString(const std::string& text, std::initializer_list<TEnum> values, const std::string& option)
+{
+  std::string choices;
+  for (TEnum value : values) {
+    if (toString(value) == text) return value;
+    choices += (choices.empty() ? "" : ", ") + toString(value);
+  }
+  throw InputError(option + ": '" + text + "' is not one of " + choices);
+}
+} // namespace
+
+std::string toString(IntraopContrast contrast)
+{
+  switch (contrast) {
+  case IntraopContrast::T1: return "t1";
+  case IntraopContrast::LowFieldT1: return "low-field-t1";
+  case IntraopContrast::T2: return "t2";
+  case IntraopContrast::Flair: return "flair";
+  }
+  return "";
+}
+
+IntraopContrast intraopContrastFromString(const std::string& text)
+{
+  return enumFromString(text, {IntraopContrast::T1, IntraopContrast::LowFieldT1, IntraopContrast::T2, IntraopContrast::Flair},
+                        "--contrast");
+}
+
+std::string toString(TumourAppearance appearance)
+{
+  switch (appearance) {
+  case TumourAppearance::RimEnhancing: return "rim-enhancing";
+  case TumourAppearance::Hypointense: return "hypointense";
+  case TumourAppearance::NearlyIsointense: return "nearly-isointense";
+  }
+  return "";
+}
+
+TumourAppearance tumourAppearanceFromString(const std::string& text)
+{
+  return enumFromString(text, {TumourAppearance::RimEnhancing, TumourAppearance::Hypointense, TumourAppearance::NearlyIsointense},
+                        "--tumour");
+}
+
+std::string toString(GapContent gap)
+{
+  return gap == GapContent::Dark ? "dark" : "fluid-and-air";
+}
+
+GapContent gapContentFromString(const std::string& text)
+{
+  return enumFromString(text, {GapContent::Dark, GapContent::FluidAndAir}, "--gap");
+}
+
 void CaseParameters::validate() const
 {
   auto require = [](bool ok, const std::string& message) {
@@ -369,6 +520,80 @@ void CaseParameters::validate() const
           "--noise: the noise fraction must be within 0 to 0.5");
   require(std::isfinite(biasStrength) && biasStrength >= 0 && biasStrength <= 1,
           "--bias: the bias strength must be within 0 to 1");
+  require(std::isfinite(gapFluidFraction) && gapFluidFraction >= 0 && gapFluidFraction <= 1 &&
+            std::isfinite(cavityFluidFraction) && cavityFluidFraction >= 0 && cavityFluidFraction <= 1,
+          "the fluid fractions of the gap and the cavity must be within 0 to 1");
+  require(std::isfinite(gravityTiltDegrees) && std::abs(gravityTiltDegrees) <= 60,
+          "the gravity tilt must be within +-60 degrees");
+}
+
+const std::vector<CaseScenario>& caseScenarios()
+{
+  static const std::vector<CaseScenario> scenarios = [] {
+    struct Variant {
+      const char* name;
+      const char* description;
+      CraniotomySite site;
+      double shift;
+      bool resection;
+      TumourAppearance tumour;
+      IntraopContrast contrast;
+      bool cavityRim;
+      double noise, bias;
+      std::uint64_t seed;
+    };
+    using S = CraniotomySite;
+    using T = TumourAppearance;
+    using C = IntraopContrast;
+    const Variant variants[] = {
+      {"rf05-lowfield", "right frontal, 5 mm, resection, hypointense tumour, low-field", S::RightFrontal, 5, true, T::Hypointense, C::LowFieldT1, false, 0.04, 0.25, 2101},
+      {"rf10-intact-lowfield", "right frontal, 10 mm, tumour in place (rim-enhancing), low-field", S::RightFrontal, 10, false, T::RimEnhancing, C::LowFieldT1, false, 0.05, 0.2, 2102},
+      {"rf15-cavityrim", "right frontal, 15 mm, resection with a bright cavity rim, 5 % noise, 30 % bias", S::RightFrontal, 15, true, T::RimEnhancing, C::T1, true, 0.05, 0.3, 2103},
+      {"rf20-lowfield", "right frontal, 20 mm, resection, low-field, 5 % noise", S::RightFrontal, 20, true, T::RimEnhancing, C::LowFieldT1, false, 0.05, 0.2, 2104},
+      {"lf10-intact-isointense", "left frontal, 10 mm, nearly isointense tumour in place, low-field", S::LeftFrontal, 10, false, T::NearlyIsointense, C::LowFieldT1, false, 0.04, 0.2, 2105},
+      {"lf15-noise8", "left frontal, 15 mm, resection with a bright rim, 8 % noise, 30 % bias", S::LeftFrontal, 15, true, T::RimEnhancing, C::T1, true, 0.08, 0.3, 2106},
+      {"lf20-intact-hypointense", "left frontal, 20 mm, hypointense tumour in place, low-field", S::LeftFrontal, 20, false, T::Hypointense, C::LowFieldT1, false, 0.04, 0.2, 2107},
+      {"rp05-intact-isointense-noise8", "right parietal, 5 mm, nearly isointense tumour in place, 8 % noise, 30 % bias", S::RightParietal, 5, false, T::NearlyIsointense, C::T1, false, 0.08, 0.3, 2108},
+      {"rp10-misaligned", "right parietal, 10 mm, resection, low-field, head 25 degrees and 29 mm from the preoperative pose", S::RightParietal, 10, true, T::RimEnhancing, C::LowFieldT1, false, 0.04, 0.2, 2109},
+      {"rp15-cavityrim-lowfield", "right parietal, 15 mm, resection with a bright rim, low-field", S::RightParietal, 15, true, T::Hypointense, C::LowFieldT1, true, 0.04, 0.25, 2110},
+      {"lp10-intact-lowfield", "left parietal, 10 mm, rim-enhancing tumour in place, low-field, 5 % noise", S::LeftParietal, 10, false, T::RimEnhancing, C::LowFieldT1, false, 0.05, 0.2, 2111},
+      {"lp15-noise8-lowfield", "left parietal, 15 mm, resection, low-field, 8 % noise, 30 % bias", S::LeftParietal, 15, true, T::RimEnhancing, C::LowFieldT1, false, 0.08, 0.3, 2112},
+      {"lp20-cavityrim", "left parietal, 20 mm, resection with a bright rim", S::LeftParietal, 20, true, T::RimEnhancing, C::T1, true, 0.04, 0.2, 2113},
+      {"rf10-t2", "right frontal, 10 mm, resection, a T2-weighted intraoperative scan", S::RightFrontal, 10, true, T::RimEnhancing, C::T2, false, 0.04, 0.2, 2114},
+      {"rf10-flair", "right frontal, 10 mm, tumour in place, a FLAIR intraoperative scan", S::RightFrontal, 10, false, T::RimEnhancing, C::Flair, false, 0.04, 0.2, 2115},
+    };
+    std::vector<CaseScenario> list{{"default", "the built-in case: right frontal, 10 mm, resection, T1, a dark gap", CaseParameters{}}};
+    for (const Variant& v : variants) {
+      CaseParameters p;
+      p.seed = v.seed;
+      p.craniotomy = v.site;
+      p.shiftMillimetres = v.shift;
+      p.resection = v.resection;
+      p.tumourAppearance = v.tumour;
+      p.contrast = v.contrast;
+      p.cavityRim = v.cavityRim;
+      p.noiseFraction = v.noise;
+      p.biasStrength = v.bias;
+      p.gap = GapContent::FluidAndAir; // every hard scenario: fluid under air in the gap and the cavity
+      if (std::string(v.name) == "rp10-misaligned") {
+        p.rotationDegrees = {15.0, -12.0, 16.0};
+        p.translationMillimetres = {20.0, -15.0, 15.0};
+      }
+      list.push_back({v.name, std::string(v.description) + "; fluid and air under the craniotomy", p});
+    }
+    return list;
+  }();
+  return scenarios;
+}
+
+const CaseScenario& caseScenario(const std::string& name)
+{
+  std::string names;
+  for (const CaseScenario& scenario : caseScenarios()) {
+    if (scenario.name == name) return scenario;
+    names += (names.empty() ? "" : ", ") + scenario.name;
+  }
+  throw InputError("--scenario: '" + name + "' is not a scenario (" + names + ")");
 }
 
 CaseFiles::CaseFiles(const fs::path& caseFolder)
@@ -555,8 +780,16 @@ SimulatedCase simulateCase(const CaseParameters& P)
       const double alpha = std::clamp(0.5 + (1.0 - rho) * meanAxis / 1.0, 0.0, 1.0);
       if (alpha > 0) {
         const double texture = 1.0 + 0.05 * (2.0 * hashUniform(P.seed, i) - 1.0);
-        const double rim = std::clamp((rho - 0.7) / 0.15, 0.0, 1.0);
-        const double tumourValue = texture * (0.45 * whiteMean + rim * (1.1 - 0.45) * whiteMean);
+        double tumourValue = 0;
+        switch (P.tumourAppearance) {
+        case TumourAppearance::RimEnhancing: {
+          const double rim = std::clamp((rho - 0.7) / 0.15, 0.0, 1.0);
+          tumourValue = texture * (0.45 * whiteMean + rim * (1.1 - 0.45) * whiteMean);
+          break;
+        }
+        case TumourAppearance::Hypointense: tumourValue = texture * 0.5 * whiteMean; break;
+        case TumourAppearance::NearlyIsointense: tumourValue = texture * 0.95 * 0.5 * (greyMean + whiteMean); break;
+        }
         value = (1 - alpha) * value + alpha * tumourValue;
       }
       if (rho <= 1.0) label = Tumour;
@@ -638,6 +871,9 @@ SimulatedCase simulateCase(const CaseParameters& P)
   auto deformedImage = newImage<ScalarImage>(G, 0.0f);
   LabelPixel* dLabels = deformedLabels->GetBufferPointer();
   float* dImage = deformedImage->GetBufferPointer();
+  // What each voxel of the preoperative brain holds now: tissue, the gap the brain sank away from,
+  // or the resection cavity (both intraoperative-only matter, label 0 in the truth).
+  std::vector<unsigned char> matter(N, Outside);
   parallelFor(N, [&](std::size_t i) {
     const Vec3 p = G.pointOf(i);
     if (brain[i]) {
@@ -646,13 +882,13 @@ SimulatedCase simulateCase(const CaseParameters& P)
       if (sourceLabel >= Parenchyma) {
         dLabels[i] = sourceLabel;
         dImage[i] = float(sampleLinear(G, preop, source, 0.0));
-      } else { // the gap between the skull and the sunken brain: fluid and air
-        dLabels[i] = Background;
-        dImage[i] = float(0.6 * csfMean);
+        matter[i] = Tissue;
+      } else {
+        matter[i] = Gap;
       }
-      if (P.resection && dLabels[i] == Tumour) { // the cavity, filled with fluid
+      if (P.resection && dLabels[i] == Tumour) {
         dLabels[i] = Background;
-        dImage[i] = float(csfMean);
+        matter[i] = Cavity;
       }
       return;
     }
@@ -666,7 +902,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
     dLabels[i] = labels[i];
     dImage[i] = preop[i];
   });
-
+  fillIntraoperativeMatter(P, G, axis, csfMean, whiteMean, matter, dImage, figures);
   // -- The patient in the scanner: intraop point y = M(x'); the truth maps y back.
   auto motion = itk::Euler3DTransform<double>::New();
   {
@@ -742,6 +978,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
   }
   const Grid Gd = G;
   const float* deformed = dImage;
+  const IntensityMap contrast = intraopContrastMap(P.contrast, csfMean / whiteMean, greyMean / whiteMean);
   parallelFor(NI, [&](std::size_t i) {
     const auto idx = I.indexOf(i);
     double sum = 0;
@@ -757,7 +994,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
     const Vec3 u{2.0 * idx[0] / (I.size[0] - 1) - 1.0, 2.0 * idx[1] / (I.size[1] - 1) - 1.0,
                  2.0 * idx[2] / (I.size[2] - 1) - 1.0};
     const double bias = std::exp(P.biasStrength * quadratic(u) / biasScale);
-    intraop[i] = float(1000.0 * std::pow(normalisedValue, 0.85) * bias);
+    intraop[i] = float(1000.0 * contrast(normalisedValue) * bias);
   });
   {
     // Rician noise, drawn in voxel order from the seeded generator.
@@ -827,6 +1064,14 @@ SimulatedCase simulateCase(const CaseParameters& P)
     ScalarImage::Pointer tissueDepth = signedDistanceMm(deformedBrainMask);
     ScalarImage::Pointer cavityDistance = signedDistanceMm(cavityMask);
     const bool hasCavity = figures.cavityVolumeMl > 0;
+    // A tumour left in place: its margin, both sides of its boundary, is where the surgeon looks.
+    auto tumourMask = newImage<MaskImage>(G, 0);
+    bool hasTumour = false;
+    for (std::size_t i = 0; i < N; ++i) {
+      tumourMask->GetBufferPointer()[i] = dLabels[i] == Tumour;
+      hasTumour = hasTumour || dLabels[i] == Tumour;
+    }
+    ScalarImage::Pointer tumourDistance = hasTumour ? signedDistanceMm(tumourMask) : nullptr;
     auto insideIntraopView = [&](const Vec3& xPrime) {
       const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(xPrime))));
       for (int k = 0; k < 3; ++k) {
@@ -835,7 +1080,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
       }
       return true;
     };
-    std::vector<Vec3> craniotomyCandidates, cavityCandidates, brainCandidates, headCandidates;
+    std::vector<Vec3> craniotomyCandidates, cavityCandidates, marginCandidates, brainCandidates, headCandidates;
     for (std::size_t i = 0; i < N; ++i) {
       const LabelPixel l = dLabels[i];
       const Vec3 p = G.pointOf(i);
@@ -845,6 +1090,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
         const double along = dot(d, axis);
         const double r = std::sqrt(std::max(dot(d, d) - along * along, 0.0));
         if (hasCavity && cavityDistance->GetBufferPointer()[i] <= 10.0f) cavityCandidates.push_back(p);
+        else if (tumourDistance && std::abs(tumourDistance->GetBufferPointer()[i]) <= 8.0f) marginCandidates.push_back(p);
         else if (r < lateralSigma && -along < 35.0) craniotomyCandidates.push_back(p);
         else brainCandidates.push_back(p);
       } else if (l == Head && norm(sampleField(W, w, p)) < 0.01 && insideIntraopView(p)) {
@@ -855,6 +1101,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
     const double separation = small ? 10.0 : 8.0;
     const auto craniotomyPoints = pickSeparated(craniotomyCandidates, 10, separation, taken, rng);
     const auto cavityPoints = pickSeparated(cavityCandidates, hasCavity ? 6 : 0, 6.0, taken, rng);
+    const auto marginPoints = pickSeparated(marginCandidates, 6, 6.0, taken, rng);
     const auto brainPoints = pickSeparated(brainCandidates, 20, 15.0, taken, rng);
     const auto headPoints = pickSeparated(headCandidates, 10, 25.0, taken, rng);
     auto add = [&](const std::vector<Vec3>& points, const std::string& prefix, bool moves) {
@@ -872,6 +1119,7 @@ SimulatedCase simulateCase(const CaseParameters& P)
     };
     add(craniotomyPoints, "craniotomy", true);
     add(cavityPoints, "near-cavity", true);
+    add(marginPoints, "tumour-margin", true);
     add(brainPoints, "brain", true);
     add(headPoints, "head", false);
   }
@@ -907,6 +1155,13 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"translation_mm", P.translationMillimetres},
       {"noise_fraction", P.noiseFraction},
       {"bias_strength", P.biasStrength},
+      {"contrast", toString(P.contrast)},
+      {"tumour_appearance", toString(P.tumourAppearance)},
+      {"gap", toString(P.gap)},
+      {"gap_fluid_fraction", P.gapFluidFraction},
+      {"cavity_fluid_fraction", P.cavityFluidFraction},
+      {"gravity_tilt_degrees", P.gravityTiltDegrees},
+      {"cavity_rim", P.cavityRim},
       {"template", (P.templateFolder / "ch2.nii.gz").string()}}},
     {"figures",
      {{"craniotomy_centre_lps", point(f.craniotomyCentre)},
@@ -918,6 +1173,8 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"max_brain_displacement_mm", f.maxBrainDisplacementMm},
       {"gap_volume_ml", f.gapVolumeMl},
       {"cavity_volume_ml", f.cavityVolumeMl},
+      {"gap_air_ml", f.gapAirMl},
+      {"cavity_air_ml", f.cavityAirMl},
       {"min_jacobian_determinant", f.minJacobianDeterminant},
       {"lateral_sigma_mm", f.lateralSigmaMm},
       {"decay_length_mm", f.decayLengthMm},

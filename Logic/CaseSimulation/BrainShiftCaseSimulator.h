@@ -32,6 +32,24 @@ enum class CaseSize {
 
 enum class CraniotomySite { RightFrontal, LeftFrontal, RightParietal, LeftParietal, Vertex };
 
+/// The intraoperative scanner's contrast, as a map of the preoperative T1 intensity through the
+/// tissue means (CSF, grey, white, fat): T1 (a gamma of 0.85, the default), low-field T1 (grey,
+/// white and CSF closer together), T2-weighted (fluid bright, white matter dark), FLAIR (fluid
+/// suppressed, grey brighter than white).
+enum class IntraopContrast { T1, LowFieldT1, T2, Flair };
+
+/// How the tumour looks in the preoperative (post-contrast T1) scan.
+enum class TumourAppearance {
+  RimEnhancing,     ///< hypointense core, enhancing rim (the default)
+  Hypointense,      ///< dark throughout, no rim
+  NearlyIsointense  ///< within a few per cent of the surrounding parenchyma
+};
+
+/// What fills the space the brain sank away from under the skull.
+enum class GapContent {
+  Dark,        ///< one dark value (0.6 of CSF), the default
+  FluidAndAir  ///< CSF-like fluid with an air-fluid level set by gravity: air above, fluid below
+};
 struct CaseParameters {
   CaseSize size = CaseSize::Full;
   std::uint64_t seed = 2000;
@@ -42,6 +60,16 @@ struct CaseParameters {
   std::array<double, 3> translationMillimetres{6.0, -8.0, 5.0};
   double noiseFraction = 0.03; ///< Rician noise sigma, as a fraction of the white matter intensity
   double biasStrength = 0.2;   ///< log-amplitude of the multiplicative bias field (0.2: about +-20 %)
+  IntraopContrast contrast = IntraopContrast::T1;
+  TumourAppearance tumourAppearance = TumourAppearance::RimEnhancing;
+  GapContent gap = GapContent::Dark;
+  /// FluidAndAir: the share of the gap (and of the cavity) below the air-fluid level, by volume.
+  double gapFluidFraction = 0.6, cavityFluidFraction = 0.8;
+  /// The patient's head is tilted this far (degrees) from "craniotomy straight up": gravity is the
+  /// inward craniotomy axis tilted towards the patient's posterior (FluidAndAir only).
+  double gravityTiltDegrees = 20.0;
+  /// A bright rim (blood products, 1.5 mm) on the wall of the resection cavity.
+  bool cavityRim = false;
   std::filesystem::path templateFolder = "/usr/share/mricron/templates";
 
   /// InputError naming the option for values outside what the model means.
@@ -51,6 +79,26 @@ struct CaseParameters {
 std::string toString(CraniotomySite site);
 /// "right-frontal", ... ; InputError listing the choices otherwise.
 CraniotomySite craniotomySiteFromString(const std::string& text);
+std::string toString(IntraopContrast contrast);   ///< "t1", "low-field-t1", "t2", "flair"
+IntraopContrast intraopContrastFromString(const std::string& text);
+std::string toString(TumourAppearance appearance); ///< "rim-enhancing", "hypointense", "nearly-isointense"
+TumourAppearance tumourAppearanceFromString(const std::string& text);
+std::string toString(GapContent gap);              ///< "dark", "fluid-and-air"
+GapContent gapContentFromString(const std::string& text);
+
+/// A named variant of the built-in case: the hard scenarios that real surgery brings (fluid and
+/// air under the craniotomy, another scanner's contrast, tumours resected or not and of every
+/// look, a bright cavity rim, shifts of 5 to 20 mm at four craniotomy sites, strong noise and
+/// bias, a large misalignment), each deterministic from its seed.
+struct CaseScenario {
+  std::string name;
+  std::string description;
+  CaseParameters parameters; ///< at full size; the caller sets `size`
+};
+/// The catalogue, "default" (the built-in case as it always was) first.
+const std::vector<CaseScenario>& caseScenarios();
+/// InputError listing the names for an unknown one.
+const CaseScenario& caseScenario(const std::string& name);
 
 /// Figures of the simulated case, for case.json and the tests.
 struct CaseFigures {
@@ -60,6 +108,7 @@ struct CaseFigures {
   double tumourVolumeMl = 0, ventricleVolumeMl = 0, brainVolumeMl = 0;
   double maxBrainDisplacementMm = 0;  ///< largest |w| over the deformed brain
   double gapVolumeMl = 0;             ///< the gap between skull and sunken brain
+  double gapAirMl = 0, cavityAirMl = 0; ///< of which air (FluidAndAir)
   double cavityVolumeMl = 0;
   double minJacobianDeterminant = 0;  ///< of x' -> x' + w(x') over the brain; > 0: no folding
   double decayLengthMm = 0, lateralSigmaMm = 0;
@@ -73,7 +122,9 @@ struct SimulatedCase {
   LabelImage::Pointer intraopLabels; ///< the truth; the gap, the cavity and the bone flap are 0
   SpatialTransform::Pointer intraopToPreop;      ///< the truth: the subsidence field after the rigid part
   SpatialTransform::Pointer rigidIntraopToPreop; ///< the rigid part alone
-  std::vector<LandmarkPair> landmarks; ///< "brain-", "craniotomy-", "near-cavity-" and "head-" pairs
+  /// "brain-", "craniotomy-", "near-cavity-" (within 10 mm of a resection cavity), "tumour-margin-"
+  /// (within 8 mm of the boundary of a tumour left in place) and "head-" pairs
+  std::vector<LandmarkPair> landmarks;
   CaseFigures figures;
 };
 

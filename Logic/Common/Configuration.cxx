@@ -113,7 +113,21 @@ Configuration Configuration::load(const fs::path& path)
   if (document.contains("classification")) {
     const json& c = document["classification"];
     if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
-    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction"}, file + ": classification");
+    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm"},
+                     file + ": classification");
+    if (c.contains("tumour_resected")) {
+      if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
+      configuration.classificationTumourResected = c["tumour_resected"].get<std::string>();
+    }
+    if (c.contains("refinement_passes")) {
+      if (!c["refinement_passes"].is_number_integer() || c["refinement_passes"].get<int>() < 0) {
+        throw InputError(file + ": classification.refinement_passes must be a whole number >= 0");
+      }
+      configuration.classificationRefinementPasses = c["refinement_passes"].get<unsigned>();
+    }
+    if (c.contains("refinement_tolerance_mm")) {
+      configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
+    }
     if (c.contains("k")) {
       if (!c["k"].is_number_integer() || c["k"].get<int>() < 1) throw InputError(file + ": classification.k must be a whole number >= 1");
       configuration.classificationK = c["k"].get<unsigned>();
@@ -201,6 +215,17 @@ void Configuration::validate(const std::string& source) const
   }
   if (classificationK < 1 || classificationK > 101) {
     throw InputError(source + ": classification k " + std::to_string(classificationK) + " is outside 1 to 101");
+  }
+  if (classificationTumourResected != "auto" && classificationTumourResected != "yes" && classificationTumourResected != "no") {
+    throw InputError(source + ": classification tumour_resected '" + classificationTumourResected + "' is not one of auto, yes, no");
+  }
+  if (classificationRefinementPasses > 10) {
+    throw InputError(source + ": classification refinement passes " + std::to_string(classificationRefinementPasses) + " is outside 0 to 10");
+  }
+  if (!std::isfinite(classificationRefinementToleranceMm) || classificationRefinementToleranceMm <= 0 ||
+      classificationRefinementToleranceMm > 10) {
+    throw InputError(source + ": classification refinement tolerance " + std::to_string(classificationRefinementToleranceMm) +
+                     " mm is outside 0 to 10 mm");
   }
   if (!std::isfinite(classificationSaturationMm) || classificationSaturationMm <= 0 || classificationSaturationMm > 100) {
     throw InputError(source + ": classification saturation " + std::to_string(classificationSaturationMm) + " mm is outside 0 to 100 mm");

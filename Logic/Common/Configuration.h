@@ -44,6 +44,14 @@ struct Configuration {
   unsigned classificationK = 7;
   double classificationSaturationMm = 10.0;
   bool classificationBiasCorrection = false;
+  /// "auto" (decided from the image where the aligned tumour lies), "yes" or "no".
+  std::string classificationTumourResected = "auto";
+  /// Passes of the classification that follows the brain (Warfield et al.'s adaptive template):
+  /// after a solve the preoperative labels warped by it become the spatial prior, and the
+  /// classification, the surface and the solve run again, at most this many times more, until the
+  /// imposed surface displacement changes by less than the tolerance (mean over its nodes).
+  unsigned classificationRefinementPasses = 2;
+  double classificationRefinementToleranceMm = 0.25;
   /// Active surface: elastic weights of the displacement (membrane, bending), the image term's
   /// share, the iteration limit.
   double surfaceMembraneWeight = 1.0;

@@ -334,7 +334,69 @@ itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySi
   return relabel->GetOutput();
 }
 
+/// The tumour's prototypes' intensity against the ventricles' (fluid) and the parenchyma's.
+TumourResectionEvidence tumourResectionEvidence(std::map<LabelPixel, std::vector<float>>& prototypeIntensity,
+                                                const TissueClassificationParameters& P)
+{
+  TumourResectionEvidence e;
+  e.tumourMedian = median(prototypeIntensity[Tumour]);
+  e.parenchymaMedian = median(prototypeIntensity[Parenchyma]);
+  e.fluidMedian = prototypeIntensity.count(Ventricles) ? median(prototypeIntensity[Ventricles]) : std::nan("");
+  const double span = e.parenchymaMedian - e.fluidMedian;
+  e.intraopRelative = std::abs(span) > 1e-6 ? (e.tumourMedian - e.fluidMedian) / span : std::nan("");
+  e.preopRelative = P.preopTumourContrast;
+  e.decidedBy = P.tumourResection == TumourResection::Auto ? "image" : "user";
+  return e;
+}
+
+/// Resected when the tumour's place now looks like fluid rather than like the tumour did before
+/// surgery (its place between fluid and parenchyma then); without that, like fluid rather than
+/// parenchyma. A tumour that looked like fluid before surgery cannot be told from its cavity by
+/// intensity: it is kept (the safe side: its surface is not freed).
+bool decideTumourResection(const TumourResectionEvidence& e, TumourResection told)
+{
+  if (told != TumourResection::Auto) return told == TumourResection::Resected;
+  if (!std::isfinite(e.intraopRelative)) return false;
+  const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
+  if (before < 0.15) return false;
+  return std::abs(e.intraopRelative) < std::abs(e.intraopRelative - before);
+}
+
 } // namespace
+
+std::string toString(TumourResection decision)
+{
+  switch (decision) {
+  case TumourResection::Auto: return "auto";
+  case TumourResection::Resected: return "yes";
+  case TumourResection::InPlace: return "no";
+  }
+  return "";
+}
+
+TumourResection tumourResectionFromString(const std::string& text)
+{
+  for (TumourResection d : {TumourResection::Auto, TumourResection::Resected, TumourResection::InPlace}) {
+    if (toString(d) == text) return d;
+  }
+  throw InputError("--tumour-resected: '" + text + "' is not one of yes, no, auto");
+}
+
+double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels)
+{
+  std::map<LabelPixel, std::vector<float>> values;
+  const float* v = preopImage.GetBufferPointer();
+  const LabelPixel* l = preopLabels.GetBufferPointer();
+  const std::size_t n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels();
+  if (preopImage.GetLargestPossibleRegion().GetNumberOfPixels() != n) return std::nan("");
+  for (std::size_t i = 0; i < n; ++i) {
+    if (l[i] >= Parenchyma && l[i] <= Tumour) values[l[i]].push_back(v[i]);
+  }
+  if (values[Tumour].empty() || values[Ventricles].empty() || values[Parenchyma].empty()) return std::nan("");
+  const double fluid = median(values[Ventricles]), parenchyma = median(values[Parenchyma]);
+  if (std::abs(parenchyma - fluid) < 1e-6) return std::nan("");
+  return (median(values[Tumour]) - fluid) / (parenchyma - fluid);
+}
 
 std::string tissueName(LabelPixel label)
 {
@@ -562,15 +624,15 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     }
   }
 
-  // A tumour whose prototypes look like the ventricles' fluid rather than the parenchyma has been
-  // resected: its class is dropped, and where it was, fluid is decided by the clean-up.
+  // A tumour that has been resected has its class dropped, and where it was, fluid is decided by
+  // the clean-up (decideTumourResection).
   std::map<LabelPixel, std::vector<float>> prototypeIntensity;
   for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) prototypeIntensity[prototypeLabels[p]].push_back(intensity[prototypeVoxels[p]]);
   const double parenchymaMedian = median(prototypeIntensity[Parenchyma]);
   const double fluidMedian = present.count(Ventricles) ? median(prototypeIntensity[Ventricles]) : std::nan("");
-  if (present.count(Tumour) && present.count(Ventricles)) {
-    const double tumourMedian = median(prototypeIntensity[Tumour]);
-    result.tumourResected = std::abs(tumourMedian - fluidMedian) < std::abs(tumourMedian - parenchymaMedian);
+  if (present.count(Tumour)) {
+    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, P);
+    result.tumourResected = decideTumourResection(result.tumourEvidence, P.tumourResection);
   }
   PrototypeCloud cloud;
   cloud.dims = D;
@@ -726,8 +788,13 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     }
   }
   result.cleanupSeconds = secondsSince(cleanupStart);
-  if (result.tumourResected) {
-    result.warnings.push_back("classify: the tumour's prototypes look like fluid: treated as resected");
+  if (result.tumourResected && result.tumourEvidence.decidedBy == "image") {
+    std::ostringstream w;
+    w.precision(2);
+    w << "classify: the tumour looks resected (where it lies it is " << result.tumourEvidence.intraopRelative
+      << " of the way from fluid to parenchyma, against " << result.tumourEvidence.preopRelative
+      << " before surgery); --tumour-resected no if it is not";
+    result.warnings.push_back(w.str());
   }
   return result;
 }

@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -35,6 +36,26 @@ struct TissuePrototype {
 class PreoperativeTissueMaps;
 std::shared_ptr<const PreoperativeTissueMaps> preparePreoperativeTissueMaps(const LabelImage& preopLabels);
 
+/// Whether the tumour of the preoperative labels has been resected: decided from the image
+/// (Auto), or told by the user who knows (`--tumour-resected yes|no`).
+enum class TumourResection { Auto, Resected, InPlace };
+std::string toString(TumourResection decision); ///< "auto", "yes", "no"
+TumourResection tumourResectionFromString(const std::string& text); ///< InputError for others
+
+/// The preoperative tumour's intensity relative to the preoperative fluid (0) and parenchyma (1),
+/// medians over the labels (a hypointense tumour about 0.3, an enhancing one near or above 1);
+/// NaN without a tumour or ventricles.
+double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels);
+
+/// What the resection decision saw: the medians of the intraoperative intensity (0-100 scale) at
+/// the tumour's, the ventricles' and the parenchyma's prototypes, the tumour's place between fluid
+/// (0) and parenchyma (1) now and before surgery, and who decided.
+struct TumourResectionEvidence {
+  double tumourMedian = 0, fluidMedian = 0, parenchymaMedian = 0;
+  double intraopRelative = 0, preopRelative = 0;
+  std::string decidedBy; ///< "image" or "user"; empty without a tumour
+};
+
 struct TissueClassificationParameters {
   /// Polled between the phases and every 65,536 voxels of the k-NN: CancelledError when set.
   CancelFlag cancel = nullptr;
@@ -51,6 +72,9 @@ struct TissueClassificationParameters {
   double fluidOpeningMm = 2.0;         ///< fluid thicker than this is a gap or a cavity, not a sulcus
   double smallHoleMl = 0.5;            ///< holes in the brain smaller than this are filled
   std::uint64_t seed = 2000;
+  TumourResection tumourResection = TumourResection::Auto;
+  /// preoperativeTumourContrast of the case; NaN: the tumour is compared with fluid and parenchyma alone.
+  double preopTumourContrast = std::numeric_limits<double>::quiet_NaN();
   void validate() const;
 };
 
@@ -58,7 +82,8 @@ struct TissueClassificationResult {
   LabelImage::Pointer labels;                ///< on the intraoperative grid, the contract's labels
   std::vector<TissuePrototype> prototypes;   ///< the ones used (record them for the next scan)
   std::map<LabelPixel, unsigned> prototypesPerClass;
-  bool tumourResected = false;               ///< the tumour's prototypes look like fluid
+  bool tumourResected = false;               ///< the tumour's prototypes look like fluid (or the user said so)
+  TumourResectionEvidence tumourEvidence;
   double featureSeconds = 0, knnSeconds = 0, cleanupSeconds = 0;
   std::size_t voxels = 0;
   std::size_t knnQueries = 0;                ///< voxels that needed a tree query (the rest shared an answer)

@@ -1,0 +1,142 @@
+// The refine stage: a classification that follows the brain where it went (Warfield et al.'s
+// adaptive, template-moderated classification). The first classification's spatial prior is the
+// preoperative anatomy through the rigid transform alone; under a large shift it says "brain"
+// where fluid and air now lie, and the surface stops short of the sunken brain. After a solve, the
+// preoperative labels warped by it are a prior much nearer the truth: classify, fit the surface
+// and solve again, until the imposed surface displacement settles.
+#include "BrainShiftErrors.h"
+#include "DeformationField.h"
+#include "ModelIO.h"
+#include "RunCommands.h"
+#include "TransformIO.h"
+
+#include <vtkDataArray.h>
+#include <vtkPointData.h>
+#include <vtkPolyData.h>
+#include <vtkUnstructuredGrid.h>
+
+#include <cmath>
+#include <cstdio>
+#include <map>
+
+namespace brainshift::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+/// The imposed displacement of each mesh node on the brain surface file (model frame, mm).
+std::map<vtkIdType, std::array<double, 3>> imposedDisplacements(const fs::path& surfaceFile)
+{
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  if (!surface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
+  vtkDataArray* displacement = surface->GetPointData()->GetArray("Displacement");
+  vtkDataArray* node = surface->GetPointData()->GetArray("MeshNodeId");
+  vtkDataArray* imposed = surface->GetPointData()->GetArray("Imposed");
+  if (!displacement || !node || !imposed) {
+    throw InputError(surfaceFile.string() + ": lacks the point arrays Displacement, MeshNodeId and Imposed");
+  }
+  std::map<vtkIdType, std::array<double, 3>> result;
+  for (vtkIdType i = 0; i < surface->GetNumberOfPoints(); ++i) {
+    if (imposed->GetComponent(i, 0) < 0.5) continue;
+    double u[3];
+    displacement->GetTuple(i, u);
+    result[vtkIdType(std::llround(node->GetComponent(i, 0)))] = {u[0], u[1], u[2]};
+  }
+  return result;
+}
+
+struct DisplacementChange {
+  double meanMm = 0, maxMm = 0;
+  std::size_t nodes = 0;
+};
+
+/// How far the imposed displacement moved between two passes, over the nodes imposed in both.
+DisplacementChange changeBetween(const std::map<vtkIdType, std::array<double, 3>>& before,
+                                 const std::map<vtkIdType, std::array<double, 3>>& after)
+{
+  DisplacementChange change;
+  double sum = 0;
+  for (const auto& [node, u] : after) {
+    const auto found = before.find(node);
+    if (found == before.end()) continue;
+    const double d = std::hypot(u[0] - found->second[0], u[1] - found->second[1], u[2] - found->second[2]);
+    sum += d;
+    change.maxMm = std::max(change.maxMm, d);
+    ++change.nodes;
+  }
+  change.meanMm = change.nodes ? sum / double(change.nodes) : 0.0;
+  return change;
+}
+
+/// The preoperative labels warped onto the intraoperative grid by the solved mesh.
+LabelImage::Pointer labelsWarpedBySolve(RunContext& context)
+{
+  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  if (!mesh->GetPointData()->GetArray("Displacement")) {
+    throw InputError(meshFile.string() + ": no Displacement; run `brainshift simulate` on this output folder first");
+  }
+  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  const DeformationField deformation = intraopToPreopField(mesh, *rigid, ImageGeometry::of(&context.intraopImage("refine")),
+                                                           DeformationFieldParameters{}, meshFile.string());
+  return warpLabelVolume(context.preopLabels("refine"), *deformation.field);
+}
+
+} // namespace
+
+void runRefineStage(RunContext& context)
+{
+  Stopwatch clock;
+  const Configuration& configuration = context.configuration();
+  const unsigned maximumPasses = configuration.classificationRefinementPasses;
+  const double tolerance = configuration.classificationRefinementToleranceMm;
+  nlohmann::json passes = nlohmann::json::array();
+  bool settled = false;
+  try {
+    for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
+      Stopwatch passClock;
+      const auto before = imposedDisplacements(context.output("brain_surface.vtp"));
+      context.setWarpedPrior(labelsWarpedBySolve(context), int(pass));
+      const double priorSeconds = passClock.seconds();
+      runClassifyStage(context);
+      runSurfaceStage(context);
+      runSimulateStage(context);
+      const DisplacementChange change = changeBetween(before, imposedDisplacements(context.output("brain_surface.vtp")));
+      settled = change.meanMm < tolerance;
+      const nlohmann::json& classify = context.report().stage("classify");
+      passes.push_back({{"pass", pass},
+                        {"wall_seconds", passClock.seconds()},
+                        {"prior_seconds", priorSeconds},
+                        {"classify_seconds", classify["wall_seconds"]},
+                        {"surface_seconds", context.report().stage("surface")["wall_seconds"]},
+                        {"simulate_seconds", context.report().stage("simulate")["wall_seconds"]},
+                        {"tumour_resected", classify["tumour_resected"]},
+                        {"imposed_nodes", context.report().stage("surface")["imposed_nodes"]},
+                        {"mean_change_mm", change.meanMm},
+                        {"max_change_mm", change.maxMm},
+                        {"compared_nodes", change.nodes}});
+      std::printf("  refine pass %u: the imposed surface moved %.2f mm mean (%.2f max), %.2f s\n", pass, change.meanMm,
+                  change.maxMm, passClock.seconds());
+      context.report().save();
+    }
+  } catch (...) {
+    context.setWarpedPrior(nullptr, 0);
+    throw;
+  }
+  context.setWarpedPrior(nullptr, 0);
+  context.report().setStage("refine", {{"wall_seconds", clock.seconds()},
+                                       {"passes", passes.size()},
+                                       {"maximum_passes", maximumPasses},
+                                       {"tolerance_mm", tolerance},
+                                       {"settled", settled || maximumPasses == 0},
+                                       {"per_pass", passes}});
+  if (!settled && maximumPasses > 0) {
+    context.report().addWarning("refine: the brain boundary still moved " +
+                                std::to_string(passes.back()["mean_change_mm"].get<double>()).substr(0, 4) +
+                                " mm mean in the last of " + std::to_string(maximumPasses) + " passes");
+  }
+}
+
+} // namespace brainshift::cli
