@@ -117,6 +117,8 @@ void putSeries(DcmDataset& data, const DicomSeriesDescription& series, const std
   put(data, DCM_SeriesInstanceUID, seriesUid);
   put(data, DCM_SeriesNumber, std::to_string(series.seriesNumber));
   put(data, DCM_SeriesDescription, series.description);
+  put(data, DCM_BodyPartExamined, "HEAD"); // not a paired body part: no Laterality
+  put(data, DCM_PatientPosition, ""); // type 2C for MR, empty: unknown to the update
   put(data, DCM_SeriesDate, dateTime("%Y%m%d"));
   put(data, DCM_SeriesTime, dateTime("%H%M%S"));
   put(data, DCM_ContentDate, dateTime("%Y%m%d"));
@@ -146,7 +148,6 @@ void putSeries(DcmDataset& data, const DicomSeriesDescription& series, const std
   put(data, DCM_PixelRepresentation, "0");
   put(data, DCM_RescaleIntercept, decimalString(rescale.intercept));
   put(data, DCM_RescaleSlope, decimalString(rescale.slope));
-  put(data, DCM_RescaleType, "US");
 }
 
 /// A display window over the whole range of the values (VOI LUT module).
