@@ -18,6 +18,9 @@
 #include <vtkPolyData.h>
 
 #include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <unistd.h>
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <sys/types.h>
@@ -102,27 +105,69 @@ Matrix4 igtlTransformMatrix(const SpatialTransform& intraopToPreop)
   return m;
 }
 
-struct OpenIGTLinkSender::Socket {
-  igtl::ClientSocket::Pointer client = igtl::ClientSocket::New();
+namespace {
+/// libOpenIGTLink's client socket on a connection made here: ConnectToServer reports a failure only
+/// on stderr and loses errno, and the descriptor is needed to see a server that hung up.
+class ConnectedSocket : public igtl::ClientSocket {
+public:
+  typedef ConnectedSocket Self;
+  typedef igtl::ClientSocket Superclass;
+  typedef igtl::SmartPointer<Self> Pointer;
+  typedef igtl::SmartPointer<const Self> ConstPointer;
+  igtlTypeMacro(ConnectedSocket, igtl::ClientSocket);
+  igtlNewMacro(ConnectedSocket);
+  void adopt(int descriptor) { m_SocketDescriptor = descriptor; }
+  int descriptor() const { return m_SocketDescriptor; }
+
+protected:
+  ConnectedSocket() = default;
+  ~ConnectedSocket() = default;
 };
 
-OpenIGTLinkSender::OpenIGTLinkSender(const IgtlEndpoint& endpoint, int sendTimeoutMs)
-  : socket_(std::make_unique<Socket>()), endpoint_(endpoint)
+/// A TCP connection to `endpoint` (TCP_NODELAY, as libOpenIGTLink sets it). ConnectionError with the
+/// system's reason otherwise.
+int connectTo(const IgtlEndpoint& endpoint)
 {
   addrinfo hints{};
   hints.ai_family = AF_INET;
   hints.ai_socktype = SOCK_STREAM;
   addrinfo* found = nullptr;
-  if (getaddrinfo(endpoint.host.c_str(), nullptr, &hints, &found) != 0 || !found) {
+  if (getaddrinfo(endpoint.host.c_str(), std::to_string(endpoint.port).c_str(), &hints, &found) != 0 || !found) {
     throw ConnectionError("OpenIGTLink server " + endpoint.text() + ": unknown host '" + endpoint.host + "'");
   }
+  std::string reason = "no address";
+  int descriptor = -1;
+  for (addrinfo* a = found; a && descriptor < 0; a = a->ai_next) {
+    descriptor = socket(a->ai_family, a->ai_socktype, a->ai_protocol);
+    if (descriptor < 0) {
+      reason = std::strerror(errno);
+      continue;
+    }
+    int on = 1;
+    setsockopt(descriptor, IPPROTO_TCP, TCP_NODELAY, &on, sizeof on);
+    if (connect(descriptor, a->ai_addr, a->ai_addrlen) != 0) {
+      reason = std::strerror(errno);
+      close(descriptor);
+      descriptor = -1;
+    }
+  }
   freeaddrinfo(found);
-  errno = 0;
-  if (socket_->client->ConnectToServer(endpoint.host.c_str(), endpoint.port) != 0) {
-    const std::string reason = errno ? std::strerror(errno) : "no answer";
+  if (descriptor < 0) {
     throw ConnectionError("OpenIGTLink server " + endpoint.text() + ": cannot connect (" + reason +
                           "; is the server, e.g. 3D Slicer's OpenIGTLinkIF connector, started?)");
   }
+  return descriptor;
+}
+} // namespace
+
+struct OpenIGTLinkSender::Socket {
+  ConnectedSocket::Pointer client = ConnectedSocket::New();
+};
+
+OpenIGTLinkSender::OpenIGTLinkSender(const IgtlEndpoint& endpoint, int sendTimeoutMs)
+  : socket_(std::make_unique<Socket>()), endpoint_(endpoint)
+{
+  socket_->client->adopt(connectTo(endpoint));
   socket_->client->SetSendTimeout(sendTimeoutMs);
 }
 
@@ -143,14 +188,11 @@ void OpenIGTLinkSender::transmit(const char* type, const std::string& device, co
 
 void OpenIGTLinkSender::checkStillConnected()
 {
-  // A 1 ms read: nothing to read (a timeout) is a live connection; an end of stream or a reset is not.
-  // A server's own messages are not read otherwise, so a byte taken here loses nothing.
+  // A server's own messages are not read; peeking shows an end of stream or a reset without taking them.
   char byte;
-  socket_->client->SetReceiveTimeout(1);
   errno = 0;
-  const int n = socket_->client->Receive(&byte, 1, 0);
-  const bool timedOut = n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK);
-  if (n == 0 || (n < 0 && !timedOut)) {
+  const ssize_t n = recv(socket_->client->descriptor(), &byte, 1, MSG_PEEK | MSG_DONTWAIT);
+  if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK)) {
     throw ConnectionError("OpenIGTLink server " + endpoint_.text() +
                           " closed the connection (it refused this client); the update was not received");
   }
