@@ -130,6 +130,17 @@ PY
   expect 2 "another patient" -- "$brainshift" export-dicom --output-dir "$here/update" --to "$here/refused" --reference-series "$other"
   [ ! -e "$here/refused" ] || [ -z "$(ls -A "$here/refused")" ] || fail "a refused export left files in $here/refused"
   ;;
+WatchExportDicom)
+  # watch --export-dicom: each registered scan's series into DIR/scan-NN/, one study per scan.
+  case_dir=$demo/case
+  "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --output-dir "$here/session" --scans "$case_dir/intraop_image.nii.gz" --export-dicom "$here/dicom" >"$here/watch.out" 2>&1 ||
+    fail "watch exited $?: $(tail -3 "$here/watch.out")"
+  [ "$(ls "$here/dicom/scan-01/warped_preop_image" | wc -l)" -eq 30 ] || fail "no series of scan 1 in $here/dicom/scan-01"
+  "$tool" compare-dicom "$here/dicom/scan-01/warped_preop_labels" "$here/session/scan-01/warped_preop_labels.nii.gz" >/dev/null ||
+    fail "scan 1's labels read back differ"
+  grep -q '"dicom"' "$here/session/watch.json" || fail "watch.json does not record the DICOM export"
+  ;;
 *)
   echo "unknown case $case_name" >&2
   exit 2
