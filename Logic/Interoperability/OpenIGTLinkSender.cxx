@@ -343,7 +343,7 @@ UpdateSendSummary sendUpdate(const UpdateFolderContents& contents, OpenIGTLinkSe
   }
   tell("STATUS brainshift");
   timed(summary.sendSeconds, [&] {
-    sender.sendStatus("brainshift", true, "BrainShift update of " + contents.folder.filename().string());
+    sender.sendStatus("brainshift", true, "BrainShift update of " + contents.folder.string());
     sender.checkStillConnected();
   });
   summary.messages = sender.messagesSent();
