@@ -12,6 +12,9 @@ packages=(
   petsc-dev libopenmpi-dev openmpi-bin
   # desktop
   qtbase5-dev libvtk9-qt-dev
+  # into the operating room's systems: OpenIGTLink out, DICOM out (DCMTK), and the DICOM tools of
+  # the interoperability tests (dcmdump/dcmodify, dciodvfy)
+  libopenigtlink-dev libdcmtk-dev dcmtk dicom3tools
   # command line, JSON, tests
   libcli11-dev nlohmann-json3-dev libgtest-dev
   # data: the Colin27 T1 template of the built-in case; python3 for the command-line tests

@@ -35,6 +35,8 @@ void addRegisterCommand(CLI::App& app);
 void addWatchCommand(CLI::App& app); ///< `watch`, WatchCommand.cxx
 void addStageCommands(CLI::App& app);
 void addBenchCommand(CLI::App& app);
+void addSendCommand(CLI::App& app);        ///< `send`, SendCommand.cxx
+void addExportDicomCommand(CLI::App& app); ///< `export-dicom`, ExportDicomCommand.cxx
 void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.cxx
 void addSurfaceBenchCommand(CLI::App& bench); ///< `bench surface`, SurfaceBenchCommand.cxx
 void addUpdateBenchCommand(CLI::App& bench);  ///< `bench update`, UpdateBenchCommand.cxx

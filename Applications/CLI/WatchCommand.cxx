@@ -9,6 +9,8 @@
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
 #include "Commands.h"
+#include "DicomSeriesExport.h"
+#include "UpdateFolder.h"
 #include "RunCommands.h"
 #include "RunReport.h"
 
@@ -34,7 +36,21 @@ struct WatchOptions {
   fs::path watchFolder;        ///< --watch-dir: new images, in name order
   unsigned maximumScans = 0;   ///< 0: until interrupted (--watch-dir), all (--scans)
   double pollSeconds = 1.0;
+  fs::path exportDicom;        ///< --export-dicom: each scan's series into DIR/scan-NN/
 };
+
+/// `export-dicom` of one scan's folder; a failure is reported and kept in watch.json, never fatal.
+std::string exportScanToDicom(const fs::path& scanFolder, const fs::path& target)
+{
+  try {
+    const DicomExportResult result = exportUpdateToDicom(inspectUpdateFolder(scanFolder), target, std::nullopt);
+    std::printf("== DICOM: %zu series in %s\n", result.seriesFolders.size(), target.string().c_str());
+    return target.string();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "brainshift watch: DICOM export of %s: %s\n", scanFolder.string().c_str(), e.what());
+    return std::string("failed: ") + e.what();
+  }
+}
 
 bool isImageFile(const fs::path& path)
 {
@@ -153,6 +169,7 @@ void runWatch(const WatchOptions& o)
       previous = run.outputDir;
       ++session.scans;
       std::printf("== scan %u registered in %.2f s\n", number, seconds);
+      if (!o.exportDicom.empty()) entry["dicom"] = exportScanToDicom(run.outputDir, o.exportDicom / folderName);
     } catch (const std::exception& e) { // one scan's failure does not end the watch
       ++failures;
       entry["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -184,6 +201,8 @@ void addWatchCommand(CLI::App& app)
   command->add_option("--watch-dir", o->watchFolder, "a folder the scanner writes images into; each new one is registered");
   command->add_option("--max-scans", o->maximumScans, "stop after this many scans (default: all listed, or never)");
   command->add_option("--poll-seconds", o->pollSeconds, "how often --watch-dir is looked at")->capture_default_str();
+  command->add_option("--export-dicom", o->exportDicom,
+                      "after each scan, its series as `export-dicom` writes them into DIR/scan-NN/");
   command->add_flag("--overwrite", o->run.overwrite, "replace an earlier watch session's scans in --output-dir");
   command->callback([o] { runWatch(*o); });
 }

@@ -18,6 +18,8 @@ int main(int argc, char** argv)
   brainshift::cli::addStageCommands(app);
   brainshift::cli::addEvaluateCommand(app);
   brainshift::cli::addBenchCommand(app);
+  brainshift::cli::addSendCommand(app);
+  brainshift::cli::addExportDicomCommand(app);
 
   std::string command = "brainshift";
   try {
