@@ -413,6 +413,29 @@ void readDisplacements(const fs::path& dat, FiniteElementTruthModel& model)
   }
 }
 
+/// Elements whose deformed Jacobian is not positive at a corner or at the centroid: where the linear
+/// solution folds, the forward map cannot be inverted uniquely.
+std::size_t countInvertedElements(const FiniteElementTruthModel& model)
+{
+  const Vec3 samples[5] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.25, 0.25, 0.25}};
+  std::size_t inverted = 0;
+  for (const auto& el : model.elements) {
+    bool folded = false;
+    for (const Vec3& s : samples) {
+      double N[10], dN[10][3];
+      quadraticShape(s, N, dN);
+      Vec3 columns[3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}}; // d x / d s_j
+      for (int k = 0; k < 10; ++k) {
+        const Vec3 x = model.nodes[std::size_t(el[std::size_t(k)])] + model.displacements[std::size_t(el[std::size_t(k)])];
+        for (int j = 0; j < 3; ++j) columns[j] = columns[j] + dN[k][j] * x;
+      }
+      folded = folded || dot(columns[0], cross(columns[1], columns[2])) <= 0;
+    }
+    inverted += folded;
+  }
+  return inverted;
+}
+
 // ---- Point location ----------------------------------------------------------------------------
 
 /// Elements listed in the cubes of a uniform grid that their bounding boxes touch.
@@ -526,6 +549,7 @@ void solveFiniteElementTruthModel(FiniteElementTruthModel& model, const FiniteEl
   readDisplacements(folder.path / (name + ".dat"), model);
   figures.maxDisplacementMm = 0;
   for (const Vec3& u : model.displacements) figures.maxDisplacementMm = std::max(figures.maxDisplacementMm, norm(u));
+  figures.invertedElements = countInvertedElements(model);
 }
 
 // ---- Interpolation and inversion ---------------------------------------------------------------

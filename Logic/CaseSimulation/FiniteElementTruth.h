@@ -47,6 +47,7 @@ struct FiniteElementTruthFigures {
   std::size_t slidingNodes = 0, fixedNodes = 0, loadedNodes = 0;
   double ccxPeakMemoryMb = 0;   ///< ccx's maximum resident set size
   double meshSeconds = 0, fieldSeconds = 0;
+  std::size_t invertedElements = 0;     ///< elements folded by the linear solution (Jacobian <= 0 at a corner or the centroid)
   std::size_t droppedElements = 0;      ///< CGAL elements outside the largest connected piece (not simulated)
   std::size_t newtonFallbacks = 0;      ///< field points where the fixed-point inversion stalled and Newton finished it
   std::size_t unconvergedInversions = 0; ///< field points where neither converged to 1e-6 mm (w taken from the last iterate)

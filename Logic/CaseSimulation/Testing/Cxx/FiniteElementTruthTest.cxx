@@ -214,7 +214,7 @@ int FiniteElementTruthTest(int, char*[])
               << figures.slidingNodes << " sliding, " << figures.fixedNodes << " fixed, " << figures.loadedNodes
               << " loaded; mesh " << figures.meshSeconds << " s, ccx " << figures.ccxSeconds << " s, " << figures.ccxPeakMemoryMb
               << " MB; field " << figures.fieldSeconds << " s (" << figures.newtonFallbacks << " Newton, "
-              << figures.unconvergedInversions << " unconverged); max |u| " << figures.maxDisplacementMm << " mm\n";
+              << figures.unconvergedInversions << " unconverged); max |u| " << figures.maxDisplacementMm << " mm; " << figures.invertedElements << " inverted\n";
     BS_CHECK(figures.elements > 500 && figures.slidingNodes > 100 && figures.fixedNodes > 20 && figures.loadedNodes > 20);
     //BS_CHECK(figures.unconvergedInversions == 0);
     std::set<int> tissues(model.labels.begin(), model.labels.end());
