@@ -33,7 +33,7 @@ struct DemoOptions {
   std::vector<double> translation{6.0, -8.0, 5.0};
   double noise = 0.03, bias = 0.2;
   std::string scenario = "default";
-  std::string contrast = "t1", tumour = "rim-enhancing", gap = "dark";
+  std::string contrast = "t1", tumour = "rim-enhancing", gap = "dark", truth = "kinematic";
   bool cavityRim = false;
   /// The options given on the command line (they override the scenario's values).
   std::set<std::string> given;
@@ -60,6 +60,7 @@ CaseParameters caseParametersOf(const DemoOptions& o)
   if (given("--tumour")) p.tumourAppearance = tumourAppearanceFromString(o.tumour);
   if (given("--gap")) p.gap = gapContentFromString(o.gap);
   if (given("--cavity-rim")) p.cavityRim = o.cavityRim;
+  if (given("--truth")) p.truth = truthModelFromString(o.truth);
   p.validate();
   return p;
 }
@@ -131,6 +132,9 @@ void addDemoCommand(CLI::App& app)
   command->add_option("--tumour", options->tumour, "tumour look: rim-enhancing, hypointense or nearly-isointense")->capture_default_str();
   command->add_option("--gap", options->gap, "what fills the gap under the craniotomy: dark or fluid-and-air")->capture_default_str();
   command->add_flag("--cavity-rim", options->cavityRim, "a bright rim of blood products on the resection cavity's wall");
+  command->add_option("--truth", options->truth,
+                      "the truth deformation: kinematic (analytic subsidence) or finite-element-sliding (CalculiX, sliding "
+                      "brain surface, fixed skull base; about 30 s more)")->capture_default_str();
   command->add_option("--config", options->run.config, "JSON configuration for register");
   command->add_option("--mesh-resolution", options->run.meshResolutionMm, "for register: tetrahedron edge length, mm");
   command->add_option("--mesh-grading", options->run.meshGrading, "for register: mesh grading (0: uniform)");
@@ -139,7 +143,7 @@ void addDemoCommand(CLI::App& app)
 
   command->callback([command, options] {
     for (const char* name : {"--seed", "--shift", "--craniotomy", "--no-resection", "--rotation", "--translation", "--noise",
-                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim"}) {
+                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim", "--truth"}) {
       if (command->count(name) > 0) options->given.insert(name);
     }
     const CaseParameters parameters = caseParametersOf(*options);

@@ -9,6 +9,7 @@
 #include "ModelIO.h"
 #include "RunCommands.h"
 #include "TransformIO.h"
+#include "VolumeIO.h"
 
 #include <vtkDataArray.h>
 #include <vtkPointData.h>
@@ -50,15 +51,18 @@ struct DisplacementChange {
   std::size_t nodes = 0;
 };
 
-/// How far the imposed displacement moved between two passes, over the nodes imposed in both.
+/// How far the imposed displacement moved between two passes, over the moving part of the surface
+/// (nodes imposed in both passes, displaced by more than 1 mm in either): the still remainder would
+/// dilute the mean.
 DisplacementChange changeBetween(const std::map<vtkIdType, std::array<double, 3>>& before,
                                  const std::map<vtkIdType, std::array<double, 3>>& after)
 {
   DisplacementChange change;
   double sum = 0;
+  auto length = [](const std::array<double, 3>& u) { return std::hypot(u[0], u[1], u[2]); };
   for (const auto& [node, u] : after) {
     const auto found = before.find(node);
-    if (found == before.end()) continue;
+    if (found == before.end() || std::max(length(u), length(found->second)) <= 1.0) continue;
     const double d = std::hypot(u[0] - found->second[0], u[1] - found->second[1], u[2] - found->second[2]);
     sum += d;
     change.maxMm = std::max(change.maxMm, d);
@@ -68,8 +72,49 @@ DisplacementChange changeBetween(const std::map<vtkIdType, std::array<double, 3>
   return change;
 }
 
+struct WarpedPrior {
+  LabelImage::Pointer labels; ///< the preoperative labels warped onto the intraoperative grid by the solve
+  MaskImage::Pointer moved;   ///< within the reach of where the solve moved the tissue by more than MovedMm
+};
+/// Where the first solve stopped short (fluid taken for brain), it moved nothing at all; the
+/// corrections lie next to the tissue it did move, within about the shift itself (the reach).
+constexpr double MovedMm = 1.0;
+
+/// Within `reachMm` of where the non-rigid part of the mapping y -> x = y + d(y) exceeds `limitMm`.
+MaskImage::Pointer movedByMoreThan(const DisplacementFieldImage& field, const SpatialTransform& rigid, double limitMm, double reachMm)
+{
+  const AffineParameters r = affineParametersOf(&rigid);
+  auto moved = MaskImage::New();
+  moved->CopyInformation(&field);
+  moved->SetRegions(field.GetLargestPossibleRegion());
+  moved->Allocate();
+  const auto size = field.GetLargestPossibleRegion().GetSize();
+  const DisplacementVector* d = field.GetBufferPointer();
+  unsigned char* m = moved->GetBufferPointer();
+  std::size_t i = 0;
+  for (std::size_t z = 0; z < size[2]; ++z) {
+    for (std::size_t y = 0; y < size[1]; ++y) {
+      for (std::size_t x = 0; x < size[0]; ++x, ++i) {
+        PhysicalPoint p;
+        field.TransformIndexToPhysicalPoint({{itk::IndexValueType(x), itk::IndexValueType(y), itk::IndexValueType(z)}}, p);
+        double squared = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double rigidA = r.translation[a] + r.matrix[a][0] * p[0] + r.matrix[a][1] * p[1] + r.matrix[a][2] * p[2];
+          const double e = p[a] + d[i][a] - rigidA;
+          squared += e * e;
+        }
+        m[i] = squared > limitMm * limitMm;
+      }
+    }
+  }
+  const ScalarImage::Pointer distance = signedDistanceMm(moved);
+  const float* toMoved = distance->GetBufferPointer();
+  for (std::size_t v = 0; v < i; ++v) m[v] = toMoved[v] <= float(reachMm);
+  return moved;
+}
+
 /// The preoperative labels warped onto the intraoperative grid by the solved mesh.
-LabelImage::Pointer labelsWarpedBySolve(RunContext& context)
+WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
 {
   const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
   vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
@@ -81,7 +126,7 @@ LabelImage::Pointer labelsWarpedBySolve(RunContext& context)
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   const DeformationField deformation = intraopToPreopField(mesh, *rigid, ImageGeometry::of(&context.intraopImage("refine")),
                                                            DeformationFieldParameters{}, meshFile.string());
-  return warpLabelVolume(context.preopLabels("refine"), *deformation.field);
+  return {warpLabelVolume(context.preopLabels("refine"), *deformation.field), reachMm > 0 ? movedByMoreThan(*deformation.field, *rigid, MovedMm, reachMm) : nullptr};
 }
 
 } // namespace
@@ -94,11 +139,14 @@ void runRefineStage(RunContext& context)
   const double tolerance = configuration.classificationRefinementToleranceMm;
   nlohmann::json passes = nlohmann::json::array();
   bool settled = false;
+  // The first classification (through the rigid prior) stays where the solve moved nothing.
+  const LabelImage::Pointer anchor = readLabelVolume(context.output("intraop_labels.nii.gz"));
   try {
     for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
       Stopwatch passClock;
       const auto before = imposedDisplacements(context.output("brain_surface.vtp"));
-      context.setWarpedPrior(labelsWarpedBySolve(context), int(pass));
+      const WarpedPrior prior = labelsWarpedBySolve(context, configuration.classificationRefinementReachMm);
+      context.setWarpedPrior(prior.labels, int(pass), configuration.classificationRefinementReachMm > 0 ? prior.moved : nullptr, anchor);
       const double priorSeconds = passClock.seconds();
       runClassifyStage(context);
       runSurfaceStage(context);

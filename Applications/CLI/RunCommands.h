@@ -3,6 +3,7 @@
 // it, the inputs read once, and the pipeline of stages in order.
 #include "Commands.h"
 #include "Configuration.h"
+#include "DistanceMaps.h"
 #include "FiniteElementSolver.h"
 #include "RigidRegistrationLogic.h"
 #include "TissueClassificationLogic.h"
@@ -70,9 +71,21 @@ public:
   /// The refine stage's spatial prior: the preoperative labels warped onto the intraoperative grid
   /// by the last solve (classify then uses them with the identity instead of the preoperative labels
   /// through the rigid transform, and surface reuses the preoperative boundary it found); null: none.
-  void setWarpedPrior(LabelImage::Pointer labels, int pass) { warpedPrior_ = std::move(labels); warpedPriorPass_ = pass; }
+  /// `moved` (on the same grid) marks where the solve moved the tissue: only there does the new
+  /// classification replace `anchor`, the classification through the rigid prior (elsewhere the two
+  /// priors agree, and an ambiguous boundary left to the prior alone would follow the last pass's
+  /// own error from pass to pass).
+  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr)
+  {
+    warpedPrior_ = std::move(labels);
+    warpedPriorPass_ = pass;
+    movedByPrior_ = std::move(moved);
+    anchorLabels_ = std::move(anchor);
+  }
   const LabelImage* warpedPrior() const { return warpedPrior_.GetPointer(); }
   int warpedPriorPass() const { return warpedPriorPass_; }
+  const MaskImage* movedByPrior() const { return movedByPrior_.GetPointer(); }
+  const LabelImage* anchorLabels() const { return anchorLabels_.GetPointer(); }
 
 private:
   RunOptions options_;
@@ -86,6 +99,8 @@ private:
   SerialScanSession* session_ = nullptr;
   LabelImage::Pointer warpedPrior_;
   int warpedPriorPass_ = 0;
+  MaskImage::Pointer movedByPrior_;
+  LabelImage::Pointer anchorLabels_;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image

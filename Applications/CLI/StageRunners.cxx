@@ -156,7 +156,18 @@ void runClassifyStage(RunContext& context)
   const TissueClassificationResult result =
     prior ? classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters)
           : classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"), *rigid, prototypes, parameters);
-  writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
+  LabelImage::Pointer labels = result.labels;
+  std::size_t relabelled = 0;
+  if (prior && context.movedByPrior() && context.anchorLabels()) {
+    const unsigned char* moved = context.movedByPrior()->GetBufferPointer();
+    const LabelPixel* anchor = context.anchorLabels()->GetBufferPointer();
+    LabelPixel* out = labels->GetBufferPointer();
+    for (std::size_t i = 0, n = labels->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+      if (!moved[i]) out[i] = anchor[i];
+      else relabelled += out[i] != anchor[i];
+    }
+  }
+  writeLabelVolume(labels, context.output("intraop_labels.nii.gz"));
   // Recorded for the next scan of the same case (intraoperative scanner frame).
   writePrototypes(result.prototypes, context.output("classification_prototypes.json"));
   nlohmann::json perClass = nlohmann::json::object();
@@ -175,6 +186,7 @@ void runClassifyStage(RunContext& context)
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
                                          {"tumour_evidence", tumourEvidenceJson(result.tumourEvidence)},
+                                         {"relabelled_where_moved", relabelled},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
                                                          : std::string("preoperative labels through the rigid transform")},
                                          {"feature_seconds", result.featureSeconds},
@@ -417,6 +429,8 @@ void runSurfaceStage(RunContext& context)
                                         {"expected_intensity_outside", result.expectedOutsideIntensity},
                                         {"tumour_resected", result.tumourResected},
                                         {"flipped_triangles", result.flippedTriangles},
+                                        {"sinking_direction", result.sinkingDirection},
+                                        {"directional_nodes", result.directionalNodes},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
                                         {"preop_boundary_from", previousSurface ? previousSurfaceFile->string() : std::string()},
                                         {"target_seconds", result.targetSeconds},

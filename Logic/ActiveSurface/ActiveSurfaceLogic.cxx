@@ -434,15 +434,23 @@ std::vector<double> residualsAt(const Eigen::MatrixXd& positions, const Trilinea
 
 /// Moves `rest` onto the zero level of `field` (reached through `toIndex`): semi-implicit steps of
 /// the membrane on v = x - rest. Nodes with a non-zero `freeReason` feel no external force.
+/// Targets on the boundary for some nodes (the sinking direction's matches): such a node is pulled
+/// towards its point instead of along the distance map's gradient.
+struct PointTargets {
+  std::vector<bool> used;
+  std::vector<Vec> points;
+};
+
 FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
                       const TrilinearVolume& field, const PreopToIntraopIndex& toIndex, const ImageEdgeTerm* edges,
-                      const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p)
+                      const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                      const Eigen::MatrixXd* start = nullptr, const PointTargets* targets = nullptr)
 {
   const Eigen::Index n = rest.rows();
   FitOutcome out;
   out.residuals.assign(std::size_t(n), 0.0);
   out.imageUsed.assign(std::size_t(n), false);
-  Eigen::MatrixXd v = Eigen::MatrixXd::Zero(n, 3), force(n, 3);
+  Eigen::MatrixXd v = start ? *start : Eigen::MatrixXd::Zero(n, 3), force(n, 3);
   // Whether the segmentation looks right at a node is decided every few iterations, not at every
   // step: a node on the fence between the two would otherwise dither and never settle.
   std::vector<signed char> plausible(std::size_t(n), -1);
@@ -519,7 +527,14 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
         continue;
       }
       bool image = false;
-      const Vec f = pull(i, rest.row(i).transpose() + v.row(i).transpose(), out.residuals[std::size_t(i)], image);
+      const Vec x = rest.row(i).transpose() + v.row(i).transpose();
+      Vec f = pull(i, x, out.residuals[std::size_t(i)], image);
+      if (targets && targets->used[std::size_t(i)]) {
+        const Vec towards = targets->points[std::size_t(i)] - x;
+        const double length = towards.norm();
+        f = length > p.maximumStepMm ? Vec(towards * (p.maximumStepMm / length)) : towards;
+        image = false;
+      }
       out.imageUsed[std::size_t(i)] = image;
       force.row(i) = f.transpose();
     }
@@ -558,6 +573,75 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
   return out;
 }
 } // namespace
+
+/// The brain under a craniotomy sinks as one body, in one direction; a closest-point match projects
+/// that motion onto each node's normal and loses its tangential part (several mm on the flanks of a
+/// 15 mm sink). The direction is estimated from the closest-point fit itself (the mean displacement
+/// of the nodes that moved more than `sinkingNodeMm`: the tangential parts cancel over the bowl),
+/// and each node that moved is matched again where the line from its preoperative place along that
+/// direction meets the target boundary (the crossing nearest to where the closest-point fit put it).
+/// Nodes whose normal is too oblique to the direction, that the image term placed, or whose line
+/// meets no boundary near, keep the closest-point match.
+struct SinkingDirectionMatch {
+  Vec direction = Vec::Zero();
+  PointTargets targets;
+  std::size_t matched = 0;
+};
+
+SinkingDirectionMatch matchAlongSinkingDirection(const Eigen::MatrixXd& rest, const FitOutcome& closest,
+                                                 const TrilinearVolume& field, const PreopToIntraopIndex& toIndex,
+                                                 const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p)
+{
+  const std::size_t n = std::size_t(rest.rows());
+  SinkingDirectionMatch match;
+  match.targets.used.assign(n, false);
+  match.targets.points.assign(n, Vec::Zero());
+  Vec sum = Vec::Zero();
+  std::size_t moving = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec u = (closest.positions.row(Eigen::Index(i)) - rest.row(Eigen::Index(i))).transpose();
+    if (freeReason[i] == 0 && u.norm() > p.sinkingNodeMm) {
+      sum += u;
+      ++moving;
+    }
+  }
+  if (moving < p.sinkingMinimumNodes || sum.norm() < 0.5 * double(moving) * p.sinkingNodeMm) return match; // no common sinking
+  match.direction = sum.normalized();
+  const Vec& d = match.direction;
+  const double step = 0.25;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (freeReason[i] != 0 || closest.imageUsed[i]) continue;
+    const Vec x = closest.positions.row(Eigen::Index(i)).transpose();
+    const Vec from = rest.row(Eigen::Index(i)).transpose();
+    if ((x - from).norm() <= p.directionalNodeMm) continue;
+    Vec gradient;
+    field.value(toIndex(x), &gradient);
+    const Vec normal = toIndex.gradientToPreop(gradient);
+    if (!(normal.norm() > 1e-6) || std::abs(normal.normalized().dot(d)) < p.directionalMinimumCosine) continue;
+    // The crossing of the zero level along from + t d nearest to the closest-point fit's t.
+    const double hint = (x - from).dot(d);
+    const double reach = std::abs(hint) + p.directionalSearchMm;
+    double best = std::numeric_limits<double>::infinity(), bestT = 0;
+    double previousT = -reach, previous = field.value(toIndex(from + previousT * d));
+    for (double t = -reach + step; t <= reach; t += step) {
+      const double value = field.value(toIndex(from + t * d));
+      if ((previous <= 0) != (value <= 0)) {
+        const double crossing = previousT + step * previous / (previous - value);
+        if (std::abs(crossing - hint) < std::abs(best - hint)) {
+          best = crossing;
+          bestT = crossing;
+        }
+      }
+      previous = value;
+      previousT = t;
+    }
+    if (!std::isfinite(best) || std::abs(bestT - hint) > p.directionalSearchMm) continue;
+    match.targets.used[i] = true;
+    match.targets.points[i] = from + bestT * d;
+    ++match.matched;
+  }
+  return match;
+}
 
 void ActiveSurfaceParameters::validate() const
 {
@@ -762,8 +846,18 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   // -- The active surface, from the preoperative boundary onto the intraoperative one.
   const auto iterationStart = std::chrono::steady_clock::now();
   const std::vector<double> initialResiduals = residualsAt(initialPositions, distanceField, toIndex);
-  const FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
+  FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
   result.iterations = fit.iterations;
+  if (p.matchAlongSinkingDirection) {
+    const SinkingDirectionMatch along = matchAlongSinkingDirection(preopBoundary, fit, distanceField, toIndex, freeReason, p);
+    result.sinkingDirection = {along.direction[0], along.direction[1], along.direction[2]};
+    result.directionalNodes = along.matched;
+    if (along.matched > 0) {
+      const Eigen::MatrixXd start = fit.positions - preopBoundary;
+      fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p, &start, &along.targets);
+      result.iterations += fit.iterations;
+    }
+  }
   result.converged = fit.converged;
   if (!result.converged) {
     result.warnings.push_back("surface: the active surface did not converge in " + std::to_string(p.maximumIterations) +

@@ -39,6 +39,7 @@
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,15 @@ struct ActiveSurfaceParameters {
   double imageTrustMm = 1.5;         ///< and is used only where it agrees with the segmentation this well
   double unmatchedResidualMm = 2.0;  ///< a node ending farther than this from the target is left free
   double resectedFraction = 0.25;    ///< tumour volume left in the intraop labels below this: resected
+  /// Match the nodes that moved along the brain's common sinking direction instead of to the
+  /// closest point (matchAlongSinkingDirection in the .cxx): the closest point loses the motion's
+  /// tangential part.
+  bool matchAlongSinkingDirection = true;
+  double sinkingNodeMm = 2.0;          ///< nodes moved farther than this by the closest-point fit estimate the direction
+  std::size_t sinkingMinimumNodes = 20; ///< fewer such nodes: no common sinking, closest points only
+  double directionalNodeMm = 0.5;      ///< nodes moved farther than this are matched along the direction
+  double directionalMinimumCosine = 0.35; ///< and only where their normal is this close to it
+  double directionalSearchMm = 10.0;   ///< how far the line's crossing may lie from the closest-point fit's
   std::vector<int> brainLabels{2, 3, 4}; ///< the mesh tissues whose union is the brain
   int tumourLabel = 4;
   void validate() const;
@@ -87,6 +97,8 @@ struct ActiveSurfaceResult {
   double expectedInsideIntensity = 0, expectedOutsideIntensity = 0;
   std::size_t imageTermNodes = 0;    ///< nodes where the image term found an edge at the end
   std::size_t flippedTriangles = 0;  ///< triangles whose orientation reversed (should be none)
+  std::array<double, 3> sinkingDirection{}; ///< the common direction estimated (model frame; 0: none)
+  std::size_t directionalNodes = 0;  ///< nodes matched along it
   /// The fit to the preoperative boundary (mesh and preoperative labels only: could be prepared
   /// before surgery), the intraoperative target's distance map, the intraoperative iterations.
   double preopBoundarySeconds = 0, targetSeconds = 0, iterationSeconds = 0;

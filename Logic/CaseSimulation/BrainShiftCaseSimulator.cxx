@@ -3,6 +3,7 @@
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
 #include "DistanceMaps.h"
+#include "FiniteElementTruth.h"
 #include "IntensityStatistics.h"
 #include "VolumeIO.h"
 
@@ -493,6 +494,16 @@ TumourAppearance tumourAppearanceFromString(const std::string& text)
                         "--tumour");
 }
 
+std::string toString(TruthModel truth)
+{
+  return truth == TruthModel::Kinematic ? "kinematic" : "finite-element-sliding";
+}
+
+TruthModel truthModelFromString(const std::string& text)
+{
+  return enumFromString(text, {TruthModel::Kinematic, TruthModel::FiniteElementSliding}, "--truth");
+}
+
 std::string toString(GapContent gap)
 {
   return gap == GapContent::Dark ? "dark" : "fluid-and-air";
@@ -561,6 +572,8 @@ const std::vector<CaseScenario>& caseScenarios()
       {"lp20-cavityrim", "left parietal, 20 mm, resection with a bright rim", S::LeftParietal, 20, true, T::RimEnhancing, C::T1, true, 0.04, 0.2, 2113},
       {"rf10-t2", "right frontal, 10 mm, resection, a T2-weighted intraoperative scan", S::RightFrontal, 10, true, T::RimEnhancing, C::T2, false, 0.04, 0.2, 2114},
       {"rf10-flair", "right frontal, 10 mm, tumour in place, a FLAIR intraoperative scan", S::RightFrontal, 10, false, T::RimEnhancing, C::Flair, false, 0.04, 0.2, 2115},
+      {"rf10-fe-sliding", "right frontal, 10 mm, resection, low-field; finite element truth (CalculiX, sliding brain surface)", S::RightFrontal, 10, true, T::RimEnhancing, C::LowFieldT1, false, 0.04, 0.2, 2116},
+      {"lp15-fe-sliding-intact", "left parietal, 15 mm, tumour in place; finite element truth (CalculiX, sliding brain surface)", S::LeftParietal, 15, false, T::Hypointense, C::T1, false, 0.05, 0.25, 2117},
     };
     std::vector<CaseScenario> list{{"default", "the built-in case: right frontal, 10 mm, resection, T1, a dark gap", CaseParameters{}}};
     for (const Variant& v : variants) {
@@ -575,6 +588,7 @@ const std::vector<CaseScenario>& caseScenarios()
       p.noiseFraction = v.noise;
       p.biasStrength = v.bias;
       p.gap = GapContent::FluidAndAir; // every hard scenario: fluid under air in the gap and the cavity
+      if (std::string(v.name).find("-fe-") != std::string::npos) p.truth = TruthModel::FiniteElementSliding;
       if (std::string(v.name) == "rp10-misaligned") {
         p.rotationDegrees = {15.0, -12.0, 16.0};
         p.translationMillimetres = {20.0, -15.0, 15.0};
@@ -861,9 +875,25 @@ SimulatedCase simulateCase(const CaseParameters& P)
     const double subsidence = P.shiftMillimetres * std::exp(-r2 / (2 * lateralSigma * lateralSigma));
     return subsidence * std::exp(-std::max(depth - subsidence, 0.0) / decayLength);
   };
-  for (std::size_t i = 0; i < W.count(); ++i) {
-    const double s = sinking(W.pointOf(i));
-    for (int k = 0; k < 3; ++k) w[i][k] = s * axis[k];
+  if (P.truth == TruthModel::Kinematic) {
+    for (std::size_t i = 0; i < W.count(); ++i) {
+      const double s = sinking(W.pointOf(i));
+      for (int k = 0; k < 3; ++k) w[i][k] = s * axis[k];
+    }
+  } else {
+    FiniteElementTruthParameters fe;
+    fe.craniotomyCentre = craniotomyCentre;
+    fe.craniotomyAxis = axis;
+    fe.shiftMm = P.shiftMillimetres;
+    fe.lateralSigmaMm = lateralSigma;
+    fe.openingRadiusMm = openingRadius;
+    fe.seed = P.seed;
+    if (small) fe.elementSizeMm = 10.0;
+    const FiniteElementTruthFigures f = solveFiniteElementTruth(*result.preopLabels, *field, fe);
+    figures.truthNodes = f.nodes;
+    figures.truthElements = f.elements;
+    figures.truthFoldedElements = f.invertedElements;
+    figures.truthSolverSeconds = f.ccxSeconds;
   }
 
   // -- The deformed configuration on the preoperative grid.
@@ -1162,6 +1192,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"cavity_fluid_fraction", P.cavityFluidFraction},
       {"gravity_tilt_degrees", P.gravityTiltDegrees},
       {"cavity_rim", P.cavityRim},
+      {"truth", toString(P.truth)},
       {"template", (P.templateFolder / "ch2.nii.gz").string()}}},
     {"figures",
      {{"craniotomy_centre_lps", point(f.craniotomyCentre)},
@@ -1178,6 +1209,10 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"min_jacobian_determinant", f.minJacobianDeterminant},
       {"lateral_sigma_mm", f.lateralSigmaMm},
       {"decay_length_mm", f.decayLengthMm},
+      {"truth_nodes", f.truthNodes},
+      {"truth_quadratic_elements", f.truthElements},
+      {"truth_folded_elements", f.truthFoldedElements},
+      {"truth_solver_seconds", f.truthSolverSeconds},
       {"landmarks", simulated.landmarks.size()}}},
     {"files",
      {{"preop_image", "preop_image.nii.gz"},

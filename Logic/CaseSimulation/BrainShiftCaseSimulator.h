@@ -45,6 +45,12 @@ enum class TumourAppearance {
   NearlyIsointense  ///< within a few per cent of the surrounding parenchyma
 };
 
+/// Where the truth deformation comes from: the kinematic subsidence (analytic, fast), or a finite
+/// element solution by CalculiX on another mesher's quadratic tetrahedra, with the skull base fixed
+/// and the brain surface outside the craniotomy sliding along the skull (FiniteElementTruth.h):
+/// neither is BrainShift's own model.
+enum class TruthModel { Kinematic, FiniteElementSliding };
+
 /// What fills the space the brain sank away from under the skull.
 enum class GapContent {
   Dark,        ///< one dark value (0.6 of CSF), the default
@@ -70,6 +76,7 @@ struct CaseParameters {
   double gravityTiltDegrees = 20.0;
   /// A bright rim (blood products, 1.5 mm) on the wall of the resection cavity.
   bool cavityRim = false;
+  TruthModel truth = TruthModel::Kinematic;
   std::filesystem::path templateFolder = "/usr/share/mricron/templates";
 
   /// InputError naming the option for values outside what the model means.
@@ -83,6 +90,8 @@ std::string toString(IntraopContrast contrast);   ///< "t1", "low-field-t1", "t2
 IntraopContrast intraopContrastFromString(const std::string& text);
 std::string toString(TumourAppearance appearance); ///< "rim-enhancing", "hypointense", "nearly-isointense"
 TumourAppearance tumourAppearanceFromString(const std::string& text);
+std::string toString(TruthModel truth);            ///< "kinematic", "finite-element-sliding"
+TruthModel truthModelFromString(const std::string& text);
 std::string toString(GapContent gap);              ///< "dark", "fluid-and-air"
 GapContent gapContentFromString(const std::string& text);
 
@@ -112,6 +121,9 @@ struct CaseFigures {
   double cavityVolumeMl = 0;
   double minJacobianDeterminant = 0;  ///< of x' -> x' + w(x') over the brain; > 0: no folding
   double decayLengthMm = 0, lateralSigmaMm = 0;
+  /// The finite element truth: nodes, quadratic elements, CalculiX's seconds, folded elements.
+  std::size_t truthNodes = 0, truthElements = 0, truthFoldedElements = 0;
+  double truthSolverSeconds = 0;
 };
 
 struct SimulatedCase {

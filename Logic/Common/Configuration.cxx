@@ -113,7 +113,8 @@ Configuration Configuration::load(const fs::path& path)
   if (document.contains("classification")) {
     const json& c = document["classification"];
     if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
-    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm"},
+    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
+                        "refinement_reach_mm"},
                      file + ": classification");
     if (c.contains("tumour_resected")) {
       if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
@@ -124,6 +125,9 @@ Configuration Configuration::load(const fs::path& path)
         throw InputError(file + ": classification.refinement_passes must be a whole number >= 0");
       }
       configuration.classificationRefinementPasses = c["refinement_passes"].get<unsigned>();
+    }
+    if (c.contains("refinement_reach_mm")) {
+      configuration.classificationRefinementReachMm = number(c["refinement_reach_mm"], file + ": classification.refinement_reach_mm");
     }
     if (c.contains("refinement_tolerance_mm")) {
       configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
@@ -226,6 +230,10 @@ void Configuration::validate(const std::string& source) const
       classificationRefinementToleranceMm > 10) {
     throw InputError(source + ": classification refinement tolerance " + std::to_string(classificationRefinementToleranceMm) +
                      " mm is outside 0 to 10 mm");
+  }
+  if (!std::isfinite(classificationRefinementReachMm) || classificationRefinementReachMm < 0 || classificationRefinementReachMm > 200) {
+    throw InputError(source + ": classification refinement reach " + std::to_string(classificationRefinementReachMm) +
+                     " mm is outside 0 to 200 mm");
   }
   if (!std::isfinite(classificationSaturationMm) || classificationSaturationMm <= 0 || classificationSaturationMm > 100) {
     throw InputError(source + ": classification saturation " + std::to_string(classificationSaturationMm) + " mm is outside 0 to 100 mm");

@@ -52,6 +52,9 @@ struct Configuration {
   /// imposed surface displacement changes by less than the tolerance (mean over its nodes).
   unsigned classificationRefinementPasses = 2;
   double classificationRefinementToleranceMm = 0.25;
+  /// A refine pass reclassifies only within this distance of where the solve moved the tissue by
+  /// more than 1 mm, and keeps the first classification elsewhere (0: everywhere).
+  double classificationRefinementReachMm = 20.0;
   /// Active surface: elastic weights of the displacement (membrane, bending), the image term's
   /// share, the iteration limit.
   double surfaceMembraneWeight = 1.0;
