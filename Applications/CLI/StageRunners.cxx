@@ -520,6 +520,7 @@ nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds
           {"thresholds", {{"reject_loss", p.rejectLoss}, {"doubt_loss", p.doubtLoss},
                           {"reject_unmatched_share", p.rejectUnmatchedShare}, {"doubt_unmatched_share", p.doubtUnmatchedShare},
                           {"doubt_residual_mm", p.doubtResidualMm}, {"reject_folded_share", p.rejectFoldedShare},
+                          {"doubt_folded_share", p.doubtFoldedShare},
                           {"band_half_width_mm", p.bandHalfWidthMm}, {"moved_mm", p.movedMm}}},
           {"seconds", seconds}};
 }
@@ -563,6 +564,21 @@ void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer
   if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, SpatialTransform::Pointer(composite.GetPointer()),
                    brainSurface, rigidFallback);
+}
+
+/// A rejected update is kept aside, for whoever must see what was set aside (and for the
+/// benchmark that scores the assessment); an accepted one removes an earlier run's.
+void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Pointer& updateField, bool rejected)
+{
+  const fs::path file = context.output("rejected_intraop_to_preop.h5");
+  if (!rejected) {
+    std::error_code ec;
+    fs::remove(file, ec);
+    return;
+  }
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  composite->AddTransform(makeDisplacementFieldTransform(updateField));
+  writeTransform(composite, file);
 }
 } // namespace
 
@@ -608,6 +624,7 @@ void runWarpStage(RunContext& context)
   Stopwatch writeClock;
   writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
                    rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback);
+  keepRejectedUpdate(context, deformation.field, rigidFallback);
   const double writeSeconds = writeClock.seconds();
 
   context.report().setStage("warp", {{"wall_seconds", clock.seconds()},
@@ -644,7 +661,8 @@ void runWarpStage(RunContext& context)
     context.report().addWarning("warp: the non-rigid update is doubtful: " + joined(trust.reasons));
   } else if (rigidFallback) {
     const std::string message = "the non-rigid update is rejected and the rigid registration is shown instead "
-                                "(intraop_to_preop.h5, the displacement field and the warped volumes hold the rigid transform alone): " +
+                                "(intraop_to_preop.h5, the displacement field and the warped volumes hold the rigid transform alone; "
+                                "the update set aside is rejected_intraop_to_preop.h5): " +
                                 joined(trust.reasons);
     context.report().addWarning("warp: " + message);
     context.report().save();

@@ -179,7 +179,7 @@ void judge(NonrigidUpdateTrustAssessment& a, const NonrigidUpdateTrustInputs& in
     const std::string reason = figure("the deformation folds in %.0f voxels (%.2f %% of the brain)", double(*in.foldedVoxels),
                                       100 * a.foldedShare);
     if (a.foldedShare > p.rejectFoldedShare) downgrade(UpdateTrust::Rejected, reason);
-    else if (*in.foldedVoxels > 0) downgrade(UpdateTrust::Doubtful, reason);
+    else if (a.foldedShare > p.doubtFoldedShare) downgrade(UpdateTrust::Doubtful, reason);
   }
 }
 } // namespace

@@ -59,8 +59,8 @@ struct NonrigidUpdateTrustParameters {
   /// Share of the surface nodes freed because no boundary matched them.
   double rejectUnmatchedShare = 0.30, doubtUnmatchedShare = 0.15;
   double doubtResidualMm = 1.5;
-  /// Share of the mesh's voxels where the deformation folds.
-  double rejectFoldedShare = 0.01;
+  /// Share of the mesh's voxels where the deformation folds (a few voxels fold in good updates too).
+  double rejectFoldedShare = 0.01, doubtFoldedShare = 0.001;
 };
 
 struct NonrigidUpdateTrustAssessment {
