@@ -517,7 +517,7 @@ nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds
           {"moved", region(a.moved)},
           {"unmatched_surface_node_share", a.unmatchedShare},
           {"folded_voxel_share", a.foldedShare},
-          {"thresholds", {{"reject_loss", p.rejectLoss}, {"doubt_loss", p.doubtLoss},
+          {"thresholds", {{"reject_gain_below", p.rejectGainBelow}, {"doubt_gain_below", p.doubtGainBelow},
                           {"reject_unmatched_share", p.rejectUnmatchedShare}, {"doubt_unmatched_share", p.doubtUnmatchedShare},
                           {"doubt_residual_mm", p.doubtResidualMm}, {"reject_folded_share", p.rejectFoldedShare},
                           {"doubt_folded_share", p.doubtFoldedShare},

@@ -156,10 +156,13 @@ void judge(NonrigidUpdateTrustAssessment& a, const NonrigidUpdateTrustInputs& in
   const RegionSimilarity& decisive = movedScored ? a.moved : a.band;
   const char* where = movedScored ? "where the update moves the brain" : "near the brain boundary";
   if (decisive.voxels >= p.minimumVoxels) {
-    const std::string reason = figure("the image under the update matches the intraoperative scan worse than the rigid result "
-                                "(correlation ratio %.3f against %.3f) ", decisive.nonrigid, decisive.rigid) + where;
-    if (-decisive.gain() > p.rejectLoss) downgrade(UpdateTrust::Rejected, reason);
-    else if (-decisive.gain() > p.doubtLoss) downgrade(UpdateTrust::Doubtful, reason);
+    const std::string figures = figure("(correlation ratio %.3f against %.3f) ", decisive.nonrigid, decisive.rigid) + where;
+    if (decisive.gain() < p.rejectGainBelow) {
+      downgrade(UpdateTrust::Rejected, "the image under the update matches the intraoperative scan worse than the rigid result " + figures);
+    } else if (decisive.gain() < p.doubtGainBelow) {
+      downgrade(UpdateTrust::Doubtful, "the image under the update matches the intraoperative scan hardly better than the rigid result " +
+                                         figures);
+    }
   } else {
     downgrade(UpdateTrust::Doubtful, "too few voxels near the brain boundary to compare the update with the rigid result (" +
                                        std::to_string(decisive.voxels) + ")");

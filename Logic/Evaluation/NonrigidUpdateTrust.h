@@ -53,14 +53,15 @@ struct NonrigidUpdateTrustParameters {
   double movedMm = 1.0;
   unsigned bins = 32;
   std::size_t minimumVoxels = 300; ///< a region with fewer voxels is not scored
-  /// eta^2 of the update below the rigid one by more than this (moved region, else band): rejected.
-  double rejectLoss = 0.02;
-  double doubtLoss = 0.005;
+  /// The gain of eta^2 (update minus rigid; where the update moves the brain, else near the
+  /// boundary) below which the update is rejected, and below which it is doubtful (not clearly better).
+  double rejectGainBelow = -0.005;
+  double doubtGainBelow = 0.01;
   /// Share of the surface nodes freed because no boundary matched them.
   double rejectUnmatchedShare = 0.30, doubtUnmatchedShare = 0.15;
   double doubtResidualMm = 1.5;
   /// Share of the mesh's voxels where the deformation folds (a few voxels fold in good updates too).
-  double rejectFoldedShare = 0.01, doubtFoldedShare = 0.001;
+  double rejectFoldedShare = 0.02, doubtFoldedShare = 0.005;
 };
 
 struct NonrigidUpdateTrustAssessment {

@@ -72,7 +72,7 @@ for size in "${sizes[@]}"; do
       "vertex-noresect:--craniotomy vertex --no-resection" "noise10:--noise 0.10" "noise25:--noise 0.25"
       "bias50:--bias 0.5" "seed7:--seed 7 --shift 8")
   else
-    cases=("default:" "shift5:--shift 5" "leftpar:--craniotomy left-parietal" "noise15:--noise 0.15")
+    cases=("default:" "shift5:--shift 5")
   fi
   say "$size: the same case without shift, and opened elsewhere (their segmentations are the wrong ones)"
   "$brainshift" demo --size "$size" --shift 0 --output-dir "$work/$size-noshift" > "$work/$size-noshift.log" 2>&1 || true
@@ -90,12 +90,10 @@ for size in "${sizes[@]}"; do
     [ -f "$labels" ] || continue
     damaged "$size" "$name" truth-labels "$base/case/truth/intraop_labels.nii.gz"
     damage "$labels" "$work/l.nii.gz" shift 8 0 0 && damaged "$size" "$name" moved-8mm-x "$work/l.nii.gz"
-    damage "$labels" "$work/l.nii.gz" shift 0 -8 0 && damaged "$size" "$name" moved-8mm-y "$work/l.nii.gz"
     damage "$labels" "$work/l.nii.gz" shift 0 0 8 && damaged "$size" "$name" moved-8mm-z "$work/l.nii.gz"
     damage "$labels" "$work/l.nii.gz" shift 4 0 0 && damaged "$size" "$name" moved-4mm-x "$work/l.nii.gz"
     damage "$labels" "$work/l.nii.gz" erode 5 && damaged "$size" "$name" eroded-5mm "$work/l.nii.gz"
     damage "$labels" "$work/l.nii.gz" dilate 5 && damaged "$size" "$name" dilated-5mm "$work/l.nii.gz"
-    damage "$labels" "$work/l.nii.gz" erode 2 && damaged "$size" "$name" eroded-2mm "$work/l.nii.gz"
     [ -f "$work/$size-noshift/intraop_labels.nii.gz" ] &&
       damaged "$size" "$name" unshifted-brain "$work/$size-noshift/intraop_labels.nii.gz"
     elsewhere=$work/$size-elsewhere-lf

@@ -151,6 +151,8 @@ int NonrigidUpdateTrustTest(int, char*[])
     folded.foldedVoxels = 500;
     folded.meshVoxels = 10000;
     BS_CHECK(assess(g, false, -SinkMm, folded).trust == UpdateTrust::Rejected);
+    folded.foldedVoxels = 100;
+    BS_CHECK(assess(g, false, -SinkMm, folded).trust == UpdateTrust::Doubtful);
     folded.foldedVoxels = 1; // a voxel or two fold in good updates as well
     BS_CHECK(assess(g, false, -SinkMm, folded).trust == UpdateTrust::Trusted);
 
