@@ -580,6 +580,28 @@ void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Point
   composite->AddTransform(makeDisplacementFieldTransform(updateField));
   writeTransform(composite, file);
 }
+
+/// The verdict on the command line; a doubtful update is a warning, a rejected one (its files
+/// already the rigid result's) a MethodError with the reasons, once the report is saved.
+void reportTrust(RunContext& context, const NonrigidUpdateTrustAssessment& trust)
+{
+  const bool rejected = trust.trust == UpdateTrust::Rejected;
+  std::printf("  trust: non-rigid update %s (correlation ratio near the brain boundary %.3f, rigid alone %.3f; where it moves "
+              "%.3f, rigid alone %.3f)%s\n",
+              trustName(trust.trust).c_str(), trust.band.nonrigid, trust.band.rigid, trust.moved.nonrigid, trust.moved.rigid,
+              rejected ? ": the files hold the rigid registration alone" : "");
+  if (trust.trust == UpdateTrust::Doubtful) {
+    context.report().addWarning("warp: the non-rigid update is doubtful: " + joined(trust.reasons));
+  } else if (rejected) {
+    const std::string message = "warp: the non-rigid update is rejected and the rigid registration is shown instead "
+                                "(intraop_to_preop.h5, the displacement field and the warped volumes hold the rigid transform alone; "
+                                "the update set aside is rejected_intraop_to_preop.h5): " +
+                                joined(trust.reasons);
+    context.report().addWarning(message);
+    context.report().save();
+    throw MethodError(message);
+  }
+}
 } // namespace
 
 void runWarpStage(RunContext& context)
@@ -653,21 +675,7 @@ void runWarpStage(RunContext& context)
   std::printf("  warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
               deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, trustSeconds,
               writeSeconds);
-  std::printf("  trust: non-rigid update %s (correlation ratio near the brain boundary %.3f, rigid alone %.3f; where it moves "
-              "%.3f, rigid alone %.3f)%s\n",
-              trustName(trust.trust).c_str(), trust.band.nonrigid, trust.band.rigid, trust.moved.nonrigid, trust.moved.rigid,
-              rigidFallback ? ": the files hold the rigid registration alone" : "");
-  if (trust.trust == UpdateTrust::Doubtful) {
-    context.report().addWarning("warp: the non-rigid update is doubtful: " + joined(trust.reasons));
-  } else if (rigidFallback) {
-    const std::string message = "the non-rigid update is rejected and the rigid registration is shown instead "
-                                "(intraop_to_preop.h5, the displacement field and the warped volumes hold the rigid transform alone; "
-                                "the update set aside is rejected_intraop_to_preop.h5): " +
-                                joined(trust.reasons);
-    context.report().addWarning("warp: " + message);
-    context.report().save();
-    throw MethodError("warp: " + message);
-  }
+  reportTrust(context, trust);
 }
 
 } // namespace brainshift::cli

@@ -19,6 +19,12 @@ def table(rows):
     lines.append(f"worse updates rejected: {count(worse, 'rejected')} of {len(worse)}; "
                  f"better updates accepted (trusted or doubtful): {accepted} of {len(better)}"
                  + (f" ({100.0 * accepted / len(better):.0f} %)" if better else ''))
+    close = [r for r in rows if abs(float(r['update_tre_mean']) - float(r['rigid_tre_mean'])) < 0.1]
+    if close:
+        verdicts = ', '.join(f"{r['case']} {r['variant']}: {float(r['update_tre_mean']) - float(r['rigid_tre_mean']):+.3f} mm, "
+                             f"{r['trust']}" for r in close)
+        lines.append('')
+        lines.append(f'within 0.1 mm of the rigid TRE (a tie rather than better or worse): {len(close)} ({verdicts})')
     return lines
 
 
