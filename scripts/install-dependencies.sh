@@ -21,6 +21,8 @@ packages=(
   mricron-data python3
   # an independent finite element solver for the cross-check test
   calculix-ccx
+  # the trust benchmark's damaged segmentations (Testing/Benchmarks/trust)
+  python3-numpy python3-scipy
   # offscreen rendering and GUI tests
   xvfb xauth
   # fast BLAS for the direct solvers (switches the system alternative)

@@ -2,6 +2,7 @@
 // files in the output folder, its entry in report.json.
 #include "ActiveSurfaceLogic.h"
 #include "DeformationField.h"
+#include "NonrigidUpdateTrust.h"
 #include "ModelNode.h"
 #include "SceneIO.h"
 #include "TransformNode.h"
@@ -449,9 +450,10 @@ namespace {
 /// The update as a 3D Slicer scene beside its files: the intraoperative scan in the world, the
 /// warped volumes on it, the preoperative image under the whole transform (Slicer warps it live),
 /// the brain surface coloured by its displacement under the rigid transform (the model frame).
+/// A rejected non-rigid update says so in the name of the transform that stands in for it.
 void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>>& warpedScalars,
                       const fs::path& warpedLabelsFile, const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigidTransform,
-                      const SpatialTransform::Pointer& wholeTransform, vtkSmartPointer<vtkPolyData> brainSurface)
+                      const SpatialTransform::Pointer& wholeTransform, vtkSmartPointer<vtkPolyData> brainSurface, bool rigidFallback)
 {
   Scene scene;
   auto stored = [](auto node, const fs::path& file) {
@@ -463,7 +465,8 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   // The data are in memory already; the nodes only point at their files.
   auto shared = [](const auto& image) { return typename std::remove_cv_t<std::remove_reference_t<decltype(image)>>::Pointer(const_cast<std::remove_cv_t<std::remove_reference_t<decltype(image)>>*>(&image)); };
   auto rigid = scene.add(stored(TransformNode::create("rigid intraop_to_preop", rigidTransform), context.output("rigid_intraop_to_preop.tfm")));
-  auto whole = scene.add(stored(TransformNode::create("intraop_to_preop", wholeTransform), context.output("intraop_to_preop.h5")));
+  const std::string wholeName = rigidFallback ? "intraop_to_preop (rigid fallback)" : "intraop_to_preop";
+  auto whole = scene.add(stored(TransformNode::create(wholeName, wholeTransform), context.output("intraop_to_preop.h5")));
   auto intraop = scene.add(stored(ScalarVolumeNode::create("intraop image", shared(context.intraopImage("warp"))), o.intraopImage));
   intraop->setRole("intraop");
   for (const auto& [name, file, image] : warpedScalars) {
@@ -487,6 +490,161 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   surface->setParentTransformId(rigid->id());
   writeScene(scene, context.output("scene.mrml"));
 }
+
+/// The rigid result on the intraoperative grid, the other candidate the update is judged against
+/// (and what is shown when the update is rejected).
+struct RigidAlternative {
+  DisplacementFieldImage::Pointer field;
+  ScalarImage::Pointer image;
+  LabelImage::Pointer labels;
+};
+
+/// The classification of this scan when the classify stage wrote it on the intraoperative grid.
+LabelImage::Pointer intraopLabelsIfWritten(RunContext& context, const ScalarImage& intraop)
+{
+  const fs::path file = context.output("intraop_labels.nii.gz");
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return nullptr;
+  LabelImage::Pointer labels = readLabelVolume(file);
+  if (!ImageGeometry::of(labels.GetPointer()).sameGridAs(ImageGeometry::of(&intraop))) {
+    throw InputError(file.string() + ": not on the intraoperative image's grid (" + ImageGeometry::of(labels.GetPointer()).describe() +
+                     ", expected " + ImageGeometry::of(&intraop).describe() + ")");
+  }
+  return labels;
+}
+
+/// Judges the non-rigid update against the rigid result (Logic/Evaluation/NonrigidUpdateTrust.h)
+/// with the figures the surface stage reported.
+NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImage& intraop, const DeformationField& deformation,
+                                           const ScalarImage& warpedImage, const LabelImage& warpedLabels,
+                                           const RigidAlternative& rigid)
+{
+  const LabelImage::Pointer intraopLabels = intraopLabelsIfWritten(context, intraop);
+  NonrigidUpdateTrustInputs in;
+  in.intraop = &intraop;
+  in.warpedByUpdate = &warpedImage;
+  in.warpedByRigid = rigid.image.GetPointer();
+  in.intraopLabels = intraopLabels.GetPointer();
+  in.labelsWarpedByUpdate = &warpedLabels;
+  in.labelsWarpedByRigid = rigid.labels.GetPointer();
+  in.updateField = deformation.field.GetPointer();
+  in.rigidField = rigid.field.GetPointer();
+  in.foldedVoxels = deformation.foldedVoxels;
+  in.meshVoxels = deformation.meshVoxels;
+  if (context.report().hasStage("surface")) {
+    const nlohmann::json& surface = context.report().stage("surface");
+    if (surface.contains("mean_residual_mm") && surface["mean_residual_mm"].is_number()) {
+      in.surfaceMeanResidualMm = surface["mean_residual_mm"].get<double>();
+    }
+    if (surface.contains("surface_nodes") && surface.contains("free_nodes") && surface["free_nodes"].is_object() &&
+        surface["free_nodes"].contains("unmatched")) {
+      in.surfaceNodes = surface["surface_nodes"].get<std::size_t>();
+      in.unmatchedSurfaceNodes = surface["free_nodes"]["unmatched"].get<std::size_t>();
+    }
+  }
+  return assessNonrigidUpdate(in);
+}
+
+nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds)
+{
+  auto region = [](const RegionSimilarity& s) {
+    return nlohmann::json{{"voxels", s.voxels}, {"update", s.nonrigid}, {"rigid", s.rigid}, {"gain", s.gain()}};
+  };
+  const NonrigidUpdateTrustParameters p;
+  return {{"nonrigid", trustName(a.trust)},
+          {"rigid_fallback", a.trust == UpdateTrust::Rejected},
+          {"reasons", a.reasons},
+          {"similarity", "correlation ratio eta^2 of the intraoperative image given the warped preoperative image"},
+          {"near_boundary", region(a.band)},
+          {"interior", region(a.interior)},
+          {"moved", region(a.moved)},
+          {"unmatched_surface_node_share", a.unmatchedShare},
+          {"folded_voxel_share", a.foldedShare},
+          {"thresholds", {{"reject_gain_below", p.rejectGainBelow}, {"doubt_gain_below", p.doubtGainBelow},
+                          {"reject_unmatched_share", p.rejectUnmatchedShare}, {"doubt_unmatched_share", p.doubtUnmatchedShare},
+                          {"doubt_residual_mm", p.doubtResidualMm}, {"reject_folded_share", p.rejectFoldedShare},
+                          {"doubt_folded_share", p.doubtFoldedShare},
+                          {"band_half_width_mm", p.bandHalfWidthMm}, {"moved_mm", p.movedMm}}},
+          {"seconds", seconds}};
+}
+
+std::string joined(const std::vector<std::string>& parts)
+{
+  std::string text;
+  for (const std::string& part : parts) text += (text.empty() ? "" : "; ") + part;
+  return text;
+}
+
+/// The mapping shown, as a field, a transform file and warped volumes, then the scene that points
+/// at them. The compressed volumes are written on a second thread while this one writes the field
+/// and the transform (HDF5, which is not thread-safe, stays on this thread alone).
+void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer& field, const ScalarImage::Pointer& warpedImage,
+                      const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigid, bool rigidFallback)
+{
+  std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
+    {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
+  for (const LoadedOverlay& overlay : context.overlays()) {
+    scalars.emplace_back("warped " + overlay.name, context.output("warped_" + overlay.name + ".nii.gz"),
+                         warpScalarVolume(*overlay.image, *field));
+  }
+  const fs::path warpedLabelsFile = context.output("warped_preop_labels.nii.gz");
+  std::future<void> volumesWritten = std::async(std::launch::async, [&scalars, &warpedLabels, &warpedLabelsFile] {
+    for (const auto& [name, file, image] : scalars) writeScalarVolume(image, file);
+    writeLabelVolume(warpedLabels, warpedLabelsFile);
+  });
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  try {
+    writeDisplacementField(field, context.output("displacement_intraop_to_preop.nrrd"));
+    composite->AddTransform(makeDisplacementFieldTransform(field));
+    writeTransform(composite, context.output("intraop_to_preop.h5"));
+  } catch (...) {
+    volumesWritten.wait(); // the thread's references must outlive it
+    throw;
+  }
+  volumesWritten.get();
+  const fs::path surfaceFile = context.output("brain_surface.vtp");
+  vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
+  writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, SpatialTransform::Pointer(composite.GetPointer()),
+                   brainSurface, rigidFallback);
+}
+
+/// A rejected update is kept aside, for whoever must see what was set aside (and for the
+/// benchmark that scores the assessment); an accepted one removes an earlier run's.
+void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Pointer& updateField, bool rejected)
+{
+  const fs::path file = context.output("rejected_intraop_to_preop.h5");
+  if (!rejected) {
+    std::error_code ec;
+    fs::remove(file, ec);
+    return;
+  }
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  composite->AddTransform(makeDisplacementFieldTransform(updateField));
+  writeTransform(composite, file);
+}
+
+/// The verdict on the command line; a doubtful update is a warning, a rejected one (its files
+/// already the rigid result's) a MethodError with the reasons, once the report is saved.
+void reportTrust(RunContext& context, const NonrigidUpdateTrustAssessment& trust)
+{
+  const bool rejected = trust.trust == UpdateTrust::Rejected;
+  std::printf("  trust: non-rigid update %s (correlation ratio near the brain boundary %.3f, rigid alone %.3f; where it moves "
+              "%.3f, rigid alone %.3f)%s\n",
+              trustName(trust.trust).c_str(), trust.band.nonrigid, trust.band.rigid, trust.moved.nonrigid, trust.moved.rigid,
+              rejected ? ": the files hold the rigid registration alone" : "");
+  if (trust.trust == UpdateTrust::Doubtful) {
+    context.report().addWarning("warp: the non-rigid update is doubtful: " + joined(trust.reasons));
+  } else if (rejected) {
+    const std::string message = "warp: the non-rigid update is rejected and the rigid registration is shown instead "
+                                "(intraop_to_preop.h5, the displacement field and the warped volumes hold the rigid transform alone; "
+                                "the update set aside is rejected_intraop_to_preop.h5): " +
+                                joined(trust.reasons);
+    context.report().addWarning(message);
+    context.report().save();
+    throw MethodError(message);
+  }
+}
 } // namespace
 
 void runWarpStage(RunContext& context)
@@ -507,46 +665,31 @@ void runWarpStage(RunContext& context)
   const ScalarImage& intraop = context.intraopImage("warp");
   const ScalarImage& preopImage = context.preopImage("warp");
   const LabelImage& preopLabels = context.preopLabels("warp");
-  const std::vector<LoadedOverlay>& overlays = context.overlays();
+  context.overlays();
   const double readSeconds = clock.seconds();
 
   Stopwatch fieldClock;
   const DeformationField deformation =
     intraopToPreopField(mesh, *rigid, ImageGeometry::of(&intraop), DeformationFieldParameters{}, meshFile.string());
+  RigidAlternative rigidOnly{linearTransformField(*rigid, ImageGeometry::of(&intraop)), nullptr, nullptr};
   const double fieldSeconds = fieldClock.seconds();
   Stopwatch warpClock;
-  const ScalarImage::Pointer warpedImage = warpScalarVolume(preopImage, *deformation.field);
-  const LabelImage::Pointer warpedLabels = warpLabelVolume(preopLabels, *deformation.field);
-  std::vector<std::pair<std::string, ScalarImage::Pointer>> warpedOverlays;
-  for (const LoadedOverlay& overlay : overlays) warpedOverlays.emplace_back(overlay.name, warpScalarVolume(*overlay.image, *deformation.field));
+  ScalarImage::Pointer warpedImage = warpScalarVolume(preopImage, *deformation.field);
+  LabelImage::Pointer warpedLabels = warpLabelVolume(preopLabels, *deformation.field);
+  rigidOnly.image = warpScalarVolume(preopImage, *rigidOnly.field);
+  rigidOnly.labels = warpLabelVolume(preopLabels, *rigidOnly.field);
   const double warpSeconds = warpClock.seconds();
 
-  // Files: the field, the transform, the warped volumes; then the scene that points at them.
-  // The compressed volumes are written on a second thread while this one writes the field and the
-  // transform (HDF5, which is not thread-safe, stays on this thread alone).
+  // Never a deformed image worse than the rigid one without a word: a rejected update gives way
+  // to the rigid result in every file, and the command fails with the reason once they are written.
+  Stopwatch trustClock;
+  const NonrigidUpdateTrustAssessment trust = assessUpdate(context, intraop, deformation, *warpedImage, *warpedLabels, rigidOnly);
+  const double trustSeconds = trustClock.seconds();
+  const bool rigidFallback = trust.trust == UpdateTrust::Rejected;
   Stopwatch writeClock;
-  std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
-    {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
-  for (const auto& [name, image] : warpedOverlays) scalars.emplace_back("warped " + name, context.output("warped_" + name + ".nii.gz"), image);
-  const fs::path warpedLabelsFile = context.output("warped_preop_labels.nii.gz");
-  std::future<void> volumesWritten = std::async(std::launch::async, [&scalars, &warpedLabels, &warpedLabelsFile] {
-    for (const auto& [name, file, image] : scalars) writeScalarVolume(image, file);
-    writeLabelVolume(warpedLabels, warpedLabelsFile);
-  });
-  auto composite = itk::CompositeTransform<double, 3>::New();
-  try {
-    writeDisplacementField(deformation.field, context.output("displacement_intraop_to_preop.nrrd"));
-    composite->AddTransform(makeDisplacementFieldTransform(deformation.field));
-    writeTransform(composite, context.output("intraop_to_preop.h5"));
-  } catch (...) {
-    volumesWritten.wait(); // the thread's references must outlive it
-    throw;
-  }
-  volumesWritten.get();
-  vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
-  if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
-  writeUpdateScene(context, scalars, context.output("warped_preop_labels.nii.gz"), warpedLabels, rigid,
-                   SpatialTransform::Pointer(composite.GetPointer()), brainSurface);
+  writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
+                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback);
+  keepRejectedUpdate(context, deformation.field, rigidFallback);
   const double writeSeconds = writeClock.seconds();
 
   context.report().setStage("warp", {{"wall_seconds", clock.seconds()},
@@ -557,20 +700,25 @@ void runWarpStage(RunContext& context)
                                      {"inverted_deformed_tetrahedra", deformation.invertedDeformedTetrahedra},
                                      {"max_non_rigid_mm", deformation.maximumNonRigidMm},
                                      {"fallback_sigma_mm", deformation.fallbackSigmaMm},
-                                     {"volumes_warped", 2 + warpedOverlays.size()},
+                                     {"volumes_warped", 2 + context.overlays().size()},
+                                     {"rigid_fallback", rigidFallback},
                                      {"read_seconds", readSeconds},
                                      {"field_seconds", fieldSeconds},
                                      {"locate_seconds", deformation.locateSeconds},
                                      {"fallback_seconds", deformation.fallbackSeconds},
                                      {"jacobian_seconds", deformation.jacobianSeconds},
                                      {"warp_seconds", warpSeconds},
+                                     {"trust_seconds", trustSeconds},
                                      {"write_seconds", writeSeconds}});
+  context.report().set("trust", trustEntry(trust, trustSeconds));
   if (deformation.foldedVoxels > 0) {
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
                                   " voxels where the deformation folds (Jacobian determinant <= 0)"});
   }
-  std::printf("  warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, files %.2f s\n", deformation.voxels,
-              deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, writeSeconds);
+  std::printf("  warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
+              deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, trustSeconds,
+              writeSeconds);
+  reportTrust(context, trust);
 }
 
 } // namespace brainshift::cli

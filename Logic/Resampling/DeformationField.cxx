@@ -303,6 +303,28 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   return result;
 }
 
+DisplacementFieldImage::Pointer linearTransformField(const SpatialTransform& transform, const ImageGeometry& grid)
+{
+  if (!isLinearTransform(&transform)) {
+    throw InputError("linearTransformField: " + describeTransform(&transform) + " is not a linear transform");
+  }
+  const GridMaps g = gridMapsOf(transform, grid);
+  DisplacementFieldImage::Pointer field = grid.allocate<DisplacementFieldImage>();
+  DisplacementVector* out = field->GetBufferPointer();
+  const long nx = long(grid.size[0]), ny = long(grid.size[1]), nz = long(grid.size[2]);
+  for (long k = 0; k < nz; ++k) {
+    for (long j = 0; j < ny; ++j) {
+      for (long i = 0; i < nx; ++i) {
+        const Vec y = g.indexToPhysical * Vec(double(i), double(j), double(k)) + g.origin;
+        const Vec d = g.rigidMatrix * y + g.rigidTranslation - y;
+        DisplacementVector& v = out[std::size_t(i + nx * (j + ny * k))];
+        for (unsigned c = 0; c < 3; ++c) v[c] = float(d[int(c)]);
+      }
+    }
+  }
+  return field;
+}
+
 namespace {
 template <class TImage, class TInterpolator>
 typename TImage::Pointer warp(const TImage& moving, const DisplacementFieldImage& field)

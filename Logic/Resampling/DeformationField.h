@@ -41,6 +41,11 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
                                      const ImageGeometry& intraopGrid, const DeformationFieldParameters& parameters,
                                      const std::string& meshName = "the mesh");
 
+/// A linear transform alone as a field on `grid`: x = T(y) = y + d(y) (the rigid result in the
+/// form of the update's field, e.g. when the non-rigid part is set aside). InputError when the
+/// transform is not linear.
+DisplacementFieldImage::Pointer linearTransformField(const SpatialTransform& transform, const ImageGeometry& grid);
+
 /// `moving` (a preoperative volume) resampled on the field's grid at y + d(y): linearly (no
 /// clipping: statistics keep their sign and size), 0 outside.
 ScalarImage::Pointer warpScalarVolume(const ScalarImage& moving, const DisplacementFieldImage& field);

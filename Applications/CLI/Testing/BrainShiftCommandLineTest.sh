@@ -350,6 +350,65 @@ WarpStage)
   expect 2 "--methods" -- "$brainshift" bench surface --output-dir "$out/bench" --methods nonsense
   ;;
 
+TrustAssessment)
+  # The demo's update is trusted; an update built on a segmentation moved 7.5 mm is worse than the
+  # rigid registration and is rejected: exit 1, every file holds the rigid transform, the report
+  # and the scene say so, the update set aside is kept.
+  out=$work/trust
+  rm -rf "$out" && mkdir -p "$out/good" "$out/damaged"
+  P=$case_dir/preop_image.nii.gz L=$case_dir/preop_labels.nii.gz I=$case_dir/intraop_image.nii.gz
+  [ "$(json_value "$demo/report.json" "['trust']['nonrigid']")" = trusted ] || fail "the demo's update is not trusted"
+  cp "$demo/rigid_intraop_to_preop.tfm" "$demo/mesh.vtu" "$demo/brain_surface.vtp" "$demo/intraop_labels.nii.gz" "$demo/report.json" "$out/good/"
+  "$brainshift" warp --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/good" >/dev/null ||
+    fail "warp of the demo's update exited $?"
+  [ "$(json_value "$out/good/report.json" "['trust']['nonrigid']")" = trusted ] || fail "the update is not trusted on its own"
+  float_check "$out/good/report.json" "['trust']['moved']['gain']" "> 0.02"
+  [ -e "$out/good/rejected_intraop_to_preop.h5" ] && fail "a trusted update wrote rejected_intraop_to_preop.h5"
+  grep -q "rigid fallback" "$out/good/scene.mrml" && fail "the scene of a trusted update says rigid fallback"
+  python3 - "$demo/intraop_labels.nii.gz" "$out/damaged/intraop_labels.nii.gz" <<'PY'
+import gzip, struct, sys
+# The segmentation moved 3 voxels (7.5 mm on the small case) along the first grid axis.
+raw = gzip.open(sys.argv[1], 'rb').read()
+dims = struct.unpack_from('<8h', raw, 40)
+size = struct.unpack_from('<h', raw, 72)[0] // 8
+offset = int(struct.unpack_from('<f', raw, 108)[0])
+nx, rows, k = dims[1], dims[2] * dims[3], 3
+data = bytearray(raw[offset:])
+out = bytearray(len(data))
+row = nx * size
+for r in range(rows):
+    line = data[r * row:(r + 1) * row]
+    out[r * row + k * size:(r + 1) * row] = line[: row - k * size]
+with gzip.open(sys.argv[2], 'wb') as f:
+    f.write(raw[:offset] + bytes(out))
+PY
+  cp "$demo/rigid_intraop_to_preop.tfm" "$demo/mesh.vtu" "$out/damaged/"
+  "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out/damaged" >/dev/null || fail "surface exited $?"
+  "$brainshift" simulate --output-dir "$out/damaged" >/dev/null || fail "simulate exited $?"
+  expect 1 "the non-rigid update is rejected and the rigid registration is shown instead" -- "$brainshift" warp \
+    --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/damaged"
+  r=$out/damaged/report.json
+  [ "$(json_value "$r" "['trust']['nonrigid']")" = rejected ] || fail "report.json: trust.nonrigid is not rejected"
+  [ "$(json_value "$r" "['trust']['rigid_fallback']")" = True ] || fail "report.json: trust.rigid_fallback is not true"
+  [ "$(json_value "$r" "['stages']['warp']['rigid_fallback']")" = True ] || fail "report.json: warp.rigid_fallback is not true"
+  float_check "$r" "['trust']['moved']['gain']" "< -0.05"
+  json_value "$r" "['warnings']" | grep -q "non-rigid update is rejected" || fail "report.json: no warning of the rejection"
+  grep -q "intraop_to_preop (rigid fallback)" "$out/damaged/scene.mrml" || fail "the scene does not mark the rigid fallback"
+  for f in rejected_intraop_to_preop.h5 intraop_to_preop.h5 displacement_intraop_to_preop.nrrd warped_preop_image.nii.gz; do
+    [ -s "$out/damaged/$f" ] || fail "$f not written"
+  done
+  # The files hold the rigid transform: the same landmark errors as the rigid file; the update set
+  # aside is worse.
+  for t in intraop_to_preop.h5 displacement_intraop_to_preop.nrrd rigid_intraop_to_preop.tfm rejected_intraop_to_preop.h5; do
+    "$brainshift" evaluate --transform "$out/damaged/$t" --landmarks "$case_dir/landmarks.csv" --json "$out/$t.json" >/dev/null ||
+      fail "evaluate $t exited $?"
+  done
+  rigid_tre=$(json_value "$out/rigid_intraop_to_preop.tfm.json" "['mean_mm']")
+  float_check "$out/intraop_to_preop.h5.json" "['mean_mm']" "- $rigid_tre < 0.01"
+  float_check "$out/intraop_to_preop.h5.json" "['mean_mm']" "- $rigid_tre > -0.01"
+  float_check "$out/displacement_intraop_to_preop.nrrd.json" "['mean_mm']" "- $rigid_tre < 0.01"
+  float_check "$out/rejected_intraop_to_preop.h5.json" "['mean_mm']" "> $rigid_tre + 1"
+  ;;
 DemoRefusesForeignFolder)
   out=$work/foreign
   rm -rf "$out" && mkdir -p "$out"

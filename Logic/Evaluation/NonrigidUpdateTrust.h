@@ -1,0 +1,84 @@
+#pragma once
+// Whether the non-rigid part of an intraoperative update can be shown: the preoperative image
+// warped by the whole update must explain the intraoperative scan at least as well as the same
+// image under the rigid transform alone, near the brain's boundary (where a wrong segmentation
+// drags the surface) and inside. The intraoperative scan may have another contrast (T2, FLAIR,
+// low field), so the similarity is the correlation ratio eta^2 = 1 - E[Var(I | W)] / Var(I) of the
+// intraoperative intensity I given the warped preoperative intensity W (in bins): any functional
+// relation between the two contrasts scores high, an inverted one as well. It judges the update
+// with the image alone, not with the classification it was built from.
+#include "ImageTypes.h"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace brainshift {
+
+enum class UpdateTrust { Trusted, Doubtful, Rejected };
+/// "trusted", "doubtful", "rejected".
+std::string trustName(UpdateTrust trust);
+
+/// eta^2 of the intraoperative image given each warp, on the same voxels and the same bins.
+struct RegionSimilarity {
+  std::size_t voxels = 0;
+  double nonrigid = 0, rigid = 0;
+  double gain() const { return nonrigid - rigid; }
+};
+
+/// All images on the intraoperative grid. Optional pointers may be null.
+struct NonrigidUpdateTrustInputs {
+  const ScalarImage* intraop = nullptr;
+  const ScalarImage* warpedByUpdate = nullptr; ///< the preoperative image under the whole update
+  const ScalarImage* warpedByRigid = nullptr;  ///< the same under the rigid transform alone
+  /// The brain (labels 2, 3, 4) of these label maps places the regions: the band is within
+  /// `bandHalfWidthMm` of any of their brain boundaries; the interior is inside the first given of
+  /// the classification and the rigidly warped labels, beyond the band. At least one is needed.
+  const LabelImage* intraopLabels = nullptr;
+  const LabelImage* labelsWarpedByUpdate = nullptr;
+  const LabelImage* labelsWarpedByRigid = nullptr;
+  /// Both mappings as fields (x = y + d(y)): where they differ by `movedMm` or more is where the
+  /// update changed what is shown (the "moved" region, the sharpest test).
+  const DisplacementFieldImage* updateField = nullptr;
+  const DisplacementFieldImage* rigidField = nullptr;
+  // What the earlier stages reported (report.json), when known.
+  std::optional<double> surfaceMeanResidualMm;
+  std::optional<std::size_t> surfaceNodes, unmatchedSurfaceNodes; ///< nodes freed because no boundary matched
+  std::optional<std::size_t> foldedVoxels, meshVoxels;
+};
+
+/// Thresholds chosen on the built-in cases (Testing/Benchmarks/trust/, README).
+struct NonrigidUpdateTrustParameters {
+  double bandHalfWidthMm = 5.0;
+  double movedMm = 1.0;
+  unsigned bins = 32;
+  std::size_t minimumVoxels = 300; ///< a region with fewer voxels is not scored
+  /// The gain of eta^2 (update minus rigid; where the update moves the brain, else near the
+  /// boundary) below which the update is rejected, and below which it is doubtful (not clearly better).
+  double rejectGainBelow = -0.005;
+  double doubtGainBelow = 0.01;
+  /// Share of the surface nodes freed because no boundary matched them.
+  double rejectUnmatchedShare = 0.30, doubtUnmatchedShare = 0.15;
+  double doubtResidualMm = 1.5;
+  /// Share of the mesh's voxels where the deformation folds (a few voxels fold in good updates too).
+  double rejectFoldedShare = 0.02, doubtFoldedShare = 0.005;
+};
+
+struct NonrigidUpdateTrustAssessment {
+  UpdateTrust trust = UpdateTrust::Trusted;
+  RegionSimilarity band, interior, moved;
+  double unmatchedShare = 0, foldedShare = 0;
+  std::vector<std::string> reasons; ///< why it is doubtful or rejected; empty when trusted
+};
+
+/// std::invalid_argument when an image is missing or not on the intraoperative grid, or no label
+/// map is given.
+NonrigidUpdateTrustAssessment assessNonrigidUpdate(const NonrigidUpdateTrustInputs& inputs,
+                                                   const NonrigidUpdateTrustParameters& parameters = {});
+
+/// eta^2 of `values` given `predictor` (both per voxel, same length) with `bins` equal bins of the
+/// predictor between `low` and `high` (values beyond go to the end bins); 0 when `values` is constant.
+double correlationRatio(const std::vector<float>& values, const std::vector<float>& predictor, unsigned bins, double low,
+                        double high);
+
+} // namespace brainshift
