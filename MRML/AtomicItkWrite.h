@@ -2,6 +2,7 @@
 // Runs an ITK writer (image or transform) onto a path atomically, compressed where the format
 // allows. Internal to MRML's writers.
 #include "AtomicFile.h"
+#include "BrainShiftErrors.h"
 
 #include <itkMacro.h>
 
@@ -20,9 +21,9 @@ void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool co
   try {
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw std::runtime_error("cannot write " + path.string() + ": " + e.GetDescription());
+    throw MethodError("cannot write " + path.string() + ": " + e.GetDescription());
   }
-  file.commit();
+  file.commit(); // verifies the file first: NIfTI's writer does not notice a full disk
 }
 
 } // namespace brainshift

@@ -7,6 +7,8 @@
 #include <vtkCallbackCommand.h>
 #include <vtkCommand.h>
 #include <vtkDataSetReader.h>
+#include <vtkErrorCode.h>
+#include <vtkNew.h>
 #include <vtkFieldData.h>
 #include <vtkPointData.h>
 #include <vtkPoints.h>
@@ -136,7 +138,16 @@ void writeModel(vtkPointSet* model, const fs::path& path)
   tagged->SetFieldData(fieldData);
 
   AtomicFile file(path);
+  // VTK's writers print their errors (14 lines for a read-only folder) and Write() returns 1
+  // even when the disk filled: the error event and the error code tell.
+  bool failed = false;
+  vtkNew<vtkCallbackCommand> onError;
+  onError->SetClientData(&failed);
+  onError->SetCallback([](vtkObject*, unsigned long, void* flag, void*) { *static_cast<bool*>(flag) = true; });
+  const int display = vtkObject::GetGlobalWarningDisplay();
+  vtkObject::GlobalWarningDisplayOff();
   int written = 0;
+  unsigned long errorCode = 0;
   if (ext == ".vtk") {
     vtkSmartPointer<vtkDataWriter> writer;
     if (isPolyData) {
@@ -151,7 +162,9 @@ void writeModel(vtkPointSet* model, const fs::path& path)
     writer->SetHeader("BrainShift output. SPACE=LPS");
     writer->SetFileName(file.temporaryPath().c_str());
     writer->SetFileTypeToBinary();
+    writer->AddObserver(vtkCommand::ErrorEvent, onError);
     written = writer->Write();
+    errorCode = writer->GetErrorCode();
   } else {
     auto tag = vtkSmartPointer<vtkStringArray>::New();
     tag->SetName(SpaceArrayName);
@@ -170,10 +183,15 @@ void writeModel(vtkPointSet* model, const fs::path& path)
     writer->SetFileName(file.temporaryPath().c_str());
     writer->SetDataModeToBinary();
     writer->SetCompressorTypeToZLib();
+    writer->AddObserver(vtkCommand::ErrorEvent, onError);
     written = writer->Write();
+    errorCode = writer->GetErrorCode();
   }
-  if (!written) {
-    throw std::runtime_error("cannot write " + path.string());
+  vtkObject::SetGlobalWarningDisplay(display);
+  if (!written || failed || errorCode != 0) {
+    const char* reason = errorCode ? vtkErrorCode::GetStringFromErrorCode(errorCode) : nullptr;
+    throw MethodError("cannot write " + path.string() + (reason && *reason ? std::string(": ") + reason : std::string()) +
+                      " (disk full or not writable?)");
   }
   file.commit();
 }

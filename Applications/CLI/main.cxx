@@ -2,11 +2,13 @@
 // usage or bad input, 1 on a failure of the method; one line on stderr says why.
 #include "BrainShiftErrors.h"
 #include "Commands.h"
+#include "SignalHandling.h"
 
 #include <iostream>
 
 int main(int argc, char** argv)
 {
+  brainshift::cli::installSignalHandling(); // before any thread: signals end the run cleanly (128 + signal)
   CLI::App app{"BrainShift: biomechanical simulation of brain shift for image-guided neurosurgery.\n"
                "Brings preoperative MRI, fMRI and segmentations into the brain's shape on each intraoperative MRI.",
                "brainshift"};

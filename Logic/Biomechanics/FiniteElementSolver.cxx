@@ -1,6 +1,7 @@
 #include "FiniteElementSolver.h"
 
 #include "BrainShiftErrors.h"
+#include "ProcessCleanup.h"
 
 #include <chrono>
 #include <cmath>
@@ -43,7 +44,10 @@ struct TemporaryFolder {
   ~TemporaryFolder()
   {
     std::error_code ignored;
-    if (owned) fs::remove_all(path, ignored);
+    if (owned) {
+      fs::remove_all(path, ignored);
+      cleanup::withdrawTemporaryPath(path);
+    }
   }
 };
 
@@ -112,6 +116,7 @@ public:
       ::_exit(127);
     }
     ::setpgid(child_, child_);
+    cleanup::addProcessGroup(child_); // a signal to the caller ends the worker too
     ::close(in[0]);
     ::close(out[1]);
     ::close(err[1]);
@@ -126,6 +131,7 @@ public:
   {
     if (!exited_) stop("");
     ::kill(-child_, SIGKILL); // no orphaned ranks, even after a normal exit
+    cleanup::withdrawProcessGroup(child_);
     ::close(input_);
     ::close(output_);
     ::close(error_);
@@ -198,6 +204,9 @@ public:
     if (WIFSIGNALED(status_)) {
       throw MethodError("the finite element worker died (signal " + std::to_string(WTERMSIG(status_)) + ")" + stderrSummary());
     }
+    if (WIFEXITED(status_) && WEXITSTATUS(status_) == 2) { // the worker refused its job: the options
+      throw InputError("the finite element worker refused the job" + stderrSummary());
+    }
     if (!WIFEXITED(status_) || WEXITSTATUS(status_) != 0) {
       throw MethodError("the finite element worker failed (exit " + std::to_string(WEXITSTATUS(status_)) + ")" + stderrSummary());
     }
@@ -261,6 +270,7 @@ TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
     if (!::mkdtemp(pattern)) throw MethodError(std::string("cannot create a work folder: ") + std::strerror(errno));
     folder.path = pattern;
     folder.owned = true;
+    cleanup::addTemporaryPath(folder.path);
   } else {
     folder.path = options.workFolder;
     fs::create_directories(folder.path);
