@@ -3,10 +3,13 @@
 // allows. Internal to MRML's writers.
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
+#include "LibraryMessages.h"
 
 #include <itkMacro.h>
 
+#include <fcntl.h>
 #include <stdexcept>
+#include <unistd.h>
 
 namespace brainshift {
 
@@ -19,9 +22,22 @@ void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool co
   writer->SetFileName(file.temporaryPath().string());
   writer->SetUseCompression(compress);
   try {
+    // NIfTI's library prints "** ERROR: NWAD: wrote only ..." itself and carries on; the file is
+    // verified below and the error reported once, naming it.
+    const int quiet = ::open("/dev/null", O_WRONLY | O_CLOEXEC), saved = ::dup(STDERR_FILENO);
+    if (quiet >= 0 && saved >= 0) ::dup2(quiet, STDERR_FILENO);
+    struct Restore {
+      int quiet, saved;
+      ~Restore()
+      {
+        if (quiet >= 0 && saved >= 0) ::dup2(saved, STDERR_FILENO);
+        if (quiet >= 0) ::close(quiet);
+        if (saved >= 0) ::close(saved);
+      }
+    } restore{quiet, saved};
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw MethodError("cannot write " + path.string() + ": " + e.GetDescription());
+    throw MethodError("cannot write " + path.string() + ": " + oneLine(e.GetDescription()));
   }
   file.commit(); // verifies the file first: NIfTI's writer does not notice a full disk
 }

@@ -7,7 +7,6 @@
 #include <vtkCallbackCommand.h>
 #include <vtkCommand.h>
 #include <vtkDataSetReader.h>
-#include <vtkErrorCode.h>
 #include <vtkNew.h>
 #include <vtkFieldData.h>
 #include <vtkPointData.h>
@@ -137,9 +136,9 @@ void writeModel(vtkPointSet* model, const fs::path& path)
   fieldData->DeepCopy(model->GetFieldData());
   tagged->SetFieldData(fieldData);
 
-  AtomicFile file(path);
-  // VTK's writers print their errors (14 lines for a read-only folder) and Write() returns 1
-  // even when the disk filled: the error event and the error code tell.
+  // VTK's writers return 1 on a full disk, and crash (double free) when a large compressed write
+  // fails midway: they write into memory here, and the bytes go to the file through a checked
+  // stream, atomically.
   bool failed = false;
   vtkNew<vtkCallbackCommand> onError;
   onError->SetClientData(&failed);
@@ -147,7 +146,7 @@ void writeModel(vtkPointSet* model, const fs::path& path)
   const int display = vtkObject::GetGlobalWarningDisplay();
   vtkObject::GlobalWarningDisplayOff();
   int written = 0;
-  unsigned long errorCode = 0;
+  std::string bytes;
   if (ext == ".vtk") {
     vtkSmartPointer<vtkDataWriter> writer;
     if (isPolyData) {
@@ -160,11 +159,11 @@ void writeModel(vtkPointSet* model, const fs::path& path)
       writer = w;
     }
     writer->SetHeader("BrainShift output. SPACE=LPS");
-    writer->SetFileName(file.temporaryPath().c_str());
+    writer->WriteToOutputStringOn();
     writer->SetFileTypeToBinary();
     writer->AddObserver(vtkCommand::ErrorEvent, onError);
-    written = writer->Write();
-    errorCode = writer->GetErrorCode();
+    written = writer->Write() && writer->GetErrorCode() == 0;
+    bytes = writer->GetOutputStdString();
   } else {
     auto tag = vtkSmartPointer<vtkStringArray>::New();
     tag->SetName(SpaceArrayName);
@@ -180,20 +179,16 @@ void writeModel(vtkPointSet* model, const fs::path& path)
       w->SetInputData(tagged);
       writer = w;
     }
-    writer->SetFileName(file.temporaryPath().c_str());
+    writer->WriteToOutputStringOn();
     writer->SetDataModeToBinary();
     writer->SetCompressorTypeToZLib();
     writer->AddObserver(vtkCommand::ErrorEvent, onError);
-    written = writer->Write();
-    errorCode = writer->GetErrorCode();
+    written = writer->Write() && writer->GetErrorCode() == 0;
+    bytes = writer->GetOutputString();
   }
   vtkObject::SetGlobalWarningDisplay(display);
-  if (!written || failed || errorCode != 0) {
-    const char* reason = errorCode ? vtkErrorCode::GetStringFromErrorCode(errorCode) : nullptr;
-    throw MethodError("cannot write " + path.string() + (reason && *reason ? std::string(": ") + reason : std::string()) +
-                      " (disk full or not writable?)");
-  }
-  file.commit();
+  if (!written || failed || bytes.empty()) throw MethodError("cannot write " + path.string() + ": VTK could not encode the model");
+  writeTextFileAtomically(path, bytes); // checked, verified, renamed
 }
 
 } // namespace brainshift

@@ -17,6 +17,7 @@ namespace brainshift::cli {
 namespace {
 int signalPipe[2] = {-1, -1};
 std::atomic<bool> endingOnSignal{false};
+int stderrCopy = -1; ///< taken at start: a writer may have muted stderr when the signal comes
 
 const char* nameOf(int number)
 {
@@ -48,7 +49,6 @@ void cleanupThread()
   endingOnSignal = true;
   // The main thread's own report of what the signal interrupted ("the worker died") is not the
   // error: its stderr goes to /dev/null, this thread's line to the real one.
-  const int stderrCopy = ::dup(STDERR_FILENO);
   const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
   if (null >= 0) ::dup2(null, STDERR_FILENO);
   brainshift::cleanup::terminateAndRemoveAll(3.0);
@@ -64,6 +64,7 @@ void installSignalHandling()
 {
   ::signal(SIGXFSZ, SIG_IGN); // a write past `ulimit -f` fails with EFBIG and is reported
   if (::pipe2(signalPipe, O_CLOEXEC) != 0) return;
+  stderrCopy = ::fcntl(STDERR_FILENO, F_DUPFD_CLOEXEC, 3);
   std::thread(cleanupThread).detach();
   struct sigaction action {};
   action.sa_handler = onSignal;

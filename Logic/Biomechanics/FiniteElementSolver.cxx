@@ -262,6 +262,16 @@ void requireWorker(const FiniteElementRunOptions& options)
   }
 }
 
+/// The job file for the worker; a failed write (a full disk) is the run's failure, named.
+void writeJobFor(const FiniteElementJob& job, const fs::path& file)
+{
+  try {
+    writeFiniteElementJob(job, file);
+  } catch (const std::runtime_error& e) {
+    throw MethodError(std::string("the finite element job: ") + e.what() + " (disk full or not writable?)");
+  }
+}
+
 TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
 {
   TemporaryFolder folder;
@@ -288,7 +298,7 @@ FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteEle
   const fs::path jobFile = folder.path / "job.bsfe", resultFile = folder.path / "result.bsfe";
   std::error_code ec;
   fs::remove(resultFile, ec);
-  writeFiniteElementJob(job, jobFile);
+  writeJobFor(job, jobFile);
   WorkerProcess worker(options, {jobFile.string(), resultFile.string()});
   const auto start = Clock::now();
   while (worker.readLine(options.timeoutSeconds - std::chrono::duration<double>(Clock::now() - start).count())) {
@@ -319,7 +329,7 @@ FiniteElementSession::FiniteElementSession(const FiniteElementJob& job, FiniteEl
   impl_->options = std::move(options);
   impl_->folder = workFolderFor(impl_->options);
   const fs::path jobFile = impl_->folder.path / "job.bsfe";
-  writeFiniteElementJob(job, jobFile);
+  writeJobFor(job, jobFile);
   impl_->fixedPart.fixedNodes = job.fixedNodes;
   impl_->prepared = job;
   impl_->worker = std::make_unique<WorkerProcess>(impl_->options, std::vector<std::string>{"--serve", jobFile.string()});
@@ -381,7 +391,7 @@ FiniteElementResult FiniteElementSession::solve(const std::vector<double>& fixed
   const fs::path resultFile = impl_->folder.path / ("result-" + std::to_string(n) + ".bsfe");
   FiniteElementJob values = impl_->fixedPart;
   values.fixedDisplacements = fixedDisplacements;
-  writeFiniteElementJob(values, valuesFile);
+  writeJobFor(values, valuesFile);
   impl_->worker->writeLine("solve " + valuesFile.string() + " " + resultFile.string());
   const auto answer = impl_->worker->readLine(impl_->options.timeoutSeconds);
   if (!answer) {
