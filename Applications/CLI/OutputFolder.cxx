@@ -25,18 +25,7 @@ fs::path canonicalName(const fs::path& path)
   return ec ? fs::absolute(path).lexically_normal() : name;
 }
 
-/// The pid that wrote the lock file, for the message ("" when unknown).
-std::string holderOf(int fd)
-{
-  char text[32] = {0};
-  const ssize_t got = ::pread(fd, text, sizeof text - 1, 0);
-  if (got <= 0) return "";
-  std::string pid(text, std::size_t(got));
-  while (!pid.empty() && (pid.back() == '\n' || pid.back() == ' ')) pid.pop_back();
-  return pid.empty() ? "" : " (process " + pid + ")";
-}
-
-/// Folders this process created: when a run refuses its input they hold nothing but the lock, and
+/// Folders this process created: when a run refuses its input they are empty, and
 /// go at exit (a refused run leaves nothing behind).
 std::vector<fs::path>& createdFolders()
 {
@@ -50,11 +39,7 @@ void removeUnusedCreatedFolders()
     std::error_code ec;
     auto entries = fs::directory_iterator(folder, ec);
     if (ec) continue;
-    bool onlyTheLock = true;
-    for (const auto& entry : entries) onlyTheLock = onlyTheLock && entry.path().filename() == ".brainshift.lock";
-    if (!onlyTheLock) continue;
-    fs::remove(folder / ".brainshift.lock", ec);
-    fs::remove(folder, ec);
+    if (entries == fs::directory_iterator()) fs::remove(folder, ec);
   }
 }
 
@@ -82,18 +67,13 @@ void claimOutputFolder(const fs::path& folder)
   requireWritable(folder);
   const fs::path name = canonicalName(folder);
   if (held.count(name)) return;
-  const fs::path lockFile = name / ".brainshift.lock";
-  const int fd = ::open(lockFile.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd < 0) throw InputError(folder.string() + ": cannot create " + lockFile.filename().string() + " (" + std::strerror(errno) + ")");
+  // The lock is on the folder itself: nothing is added to it, and it goes with the process.
+  const int fd = ::open(name.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) throw InputError(folder.string() + ": cannot open the output folder (" + std::strerror(errno) + ")");
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
-    const std::string holder = holderOf(fd);
     ::close(fd);
-    throw InputError(folder.string() + ": another brainshift run is writing into this folder" + holder +
-                     "; wait for it to end or choose another --output-dir");
-  }
-  const std::string pid = std::to_string(::getpid()) + "\n";
-  if (::ftruncate(fd, 0) == 0 && ::pwrite(fd, pid.data(), pid.size(), 0) < 0) {
-    // the pid is only for the message of a refused run
+    throw InputError(folder.string() + ": another brainshift run is writing into this folder; wait for it to end or "
+                     "choose another --output-dir");
   }
   held[name] = fd;
   cleanup::removeStaleTemporaries(name);

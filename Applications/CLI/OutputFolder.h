@@ -8,7 +8,7 @@ namespace brainshift::cli {
 
 /// Creates `folder` if needed and claims it for this process: InputError (exit 2) naming the folder
 /// when it cannot be created, is not writable, or another brainshift run holds it (an advisory
-/// flock on `.brainshift.lock` inside, released when the process ends, however it ends). Removes
+/// flock on the folder itself, released when the process ends, however it ends). Removes
 /// the stale temporary files of runs that died there. Claiming a folder twice in one process is
 /// allowed (a pipeline inside a subcommand).
 void claimOutputFolder(const std::filesystem::path& folder);

@@ -488,6 +488,7 @@ public:
     std::string unread;
     for (PetscInt i = 0; i < count; ++i) {
       const std::string name = names[i];
+      if (name == "-serve") continue; // the worker's own argument (--serve JOB), which PETSc also parses
       if (beforeSolve && (name.rfind("ksp_view", 0) == 0 || name.rfind("ksp_converged_reason", 0) == 0)) continue;
       unread += (unread.empty() ? "-" : ", -") + name + (values[i] ? std::string(" ") + values[i] : std::string());
     }
