@@ -7,9 +7,7 @@
 
 #include <itkMacro.h>
 
-#include <fcntl.h>
 #include <stdexcept>
-#include <unistd.h>
 
 namespace brainshift {
 
@@ -24,17 +22,7 @@ void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool co
   try {
     // NIfTI's library prints "** ERROR: NWAD: wrote only ..." itself and carries on; the file is
     // verified below and the error reported once, naming it.
-    const int quiet = ::open("/dev/null", O_WRONLY | O_CLOEXEC), saved = ::dup(STDERR_FILENO);
-    if (quiet >= 0 && saved >= 0) ::dup2(quiet, STDERR_FILENO);
-    struct Restore {
-      int quiet, saved;
-      ~Restore()
-      {
-        if (quiet >= 0 && saved >= 0) ::dup2(saved, STDERR_FILENO);
-        if (quiet >= 0) ::close(quiet);
-        if (saved >= 0) ::close(saved);
-      }
-    } restore{quiet, saved};
+    const MutedStderr muted;
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
     throw MethodError("cannot write " + path.string() + ": " + oneLine(e.GetDescription()));

@@ -478,9 +478,13 @@ private:
 public:
   /// Every solver option given was read by PETSc: a misspelt or unknown one (-ksp_typo) would
   /// otherwise be ignored in silence. `beforeSolve`: the options PETSc reads only in KSPSolve
-  /// (views, monitors of the reason) are still to come and not counted.
-  static void requireEveryOptionRead(bool beforeSolve)
+  /// (views, monitors of the reason) are still to come and not counted. A direct solve (preonly)
+  /// meets any tolerance: its tolerances and iteration limits, unread, are not counted either.
+  void requireEveryOptionRead(bool beforeSolve) const
   {
+    KSPType type;
+    check(KSPGetType(ksp_, &type), "KSPGetType");
+    const bool direct = std::string(type) == KSPPREONLY;
     PetscInt count = 0;
     char** names = nullptr;
     char** values = nullptr;
@@ -489,6 +493,7 @@ public:
     for (PetscInt i = 0; i < count; ++i) {
       const std::string name = names[i];
       if (name == "-serve") continue; // the worker's own argument (--serve JOB), which PETSc also parses
+      if (direct && (name == "ksp_rtol" || name == "ksp_atol" || name == "ksp_divtol" || name == "ksp_max_it")) continue;
       if (beforeSolve && (name.rfind("ksp_view", 0) == 0 || name.rfind("ksp_converged_reason", 0) == 0)) continue;
       unread += (unread.empty() ? "-" : ", -") + name + (values[i] ? std::string(" ") + values[i] : std::string());
     }
@@ -609,7 +614,7 @@ int main(int argc, char** argv)
     } else {
       PreparedProblem problem(job, rank, size, false);
       const FiniteElementResult result = problem.solveFor(job.fixedDisplacements);
-      PreparedProblem::requireEveryOptionRead(false);
+      problem.requireEveryOptionRead(false);
       if (rank == 0) writeFiniteElementResult(result, argv[2]);
     }
   } catch (const WorkerFailure& e) {
