@@ -1,10 +1,14 @@
 #include "AtomicFile.h"
 
 #include "BrainShiftErrors.h"
+#include "ProcessCleanup.h"
+
+#include <zlib.h>
 
 #include <atomic>
 #include <fstream>
 #include <sstream>
+#include <sys/resource.h>
 #include <system_error>
 #include <unistd.h>
 
@@ -13,7 +17,44 @@ namespace fs = std::filesystem;
 
 namespace {
 std::atomic<unsigned> temporaryCounter{0};
+
+bool endsWith(const std::string& text, const std::string& tail)
+{
+  return text.size() >= tail.size() && text.compare(text.size() - tail.size(), tail.size(), tail) == 0;
 }
+
+/// Whether a gzip file decompresses to its end: a write cut short (full disk, file-size limit)
+/// leaves a stream without its trailer, which some writers (NIfTI's) do not notice.
+bool completeGzip(const fs::path& path)
+{
+  gzFile in = ::gzopen(path.c_str(), "rb");
+  if (!in) return false;
+  char buffer[1 << 16];
+  int got = 0;
+  while ((got = ::gzread(in, buffer, sizeof buffer)) > 0) {
+  }
+  int error = Z_OK;
+  ::gzerror(in, &error);
+  const bool complete = got == 0 && error == Z_OK;
+  return ::gzclose(in) == Z_OK && complete;
+}
+
+/// MethodError naming `target` unless `written` holds a whole file.
+void verifyWrittenFile(const fs::path& written, const fs::path& target)
+{
+  std::error_code ec;
+  const auto size = fs::is_regular_file(written, ec) ? fs::file_size(written, ec) : 0;
+  if (ec || size == 0) throw MethodError("cannot write " + target.string() + ": nothing was written (disk full or not writable?)");
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_FSIZE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY && size >= limit.rlim_cur) {
+    throw MethodError("cannot write " + target.string() + ": the file reached the file-size limit (" +
+                      std::to_string(limit.rlim_cur) + " bytes) and is incomplete");
+  }
+  if (endsWith(target.string(), ".gz") && !completeGzip(written)) {
+    throw MethodError("cannot write " + target.string() + ": the written file is incomplete (disk full?)");
+  }
+}
+} // namespace
 
 AtomicFile::AtomicFile(fs::path target)
   : target_(std::move(target))
@@ -26,6 +67,7 @@ AtomicFile::AtomicFile(fs::path target)
   }
   temporary_ = folder / (".tmp-" + std::to_string(::getpid()) + "-" +
                          std::to_string(temporaryCounter++) + "-" + target_.filename().string());
+  cleanup::addTemporaryPath(temporary_);
 }
 
 AtomicFile::~AtomicFile()
@@ -34,17 +76,19 @@ AtomicFile::~AtomicFile()
     std::error_code ignored;
     fs::remove(temporary_, ignored);
   }
+  cleanup::withdrawTemporaryPath(temporary_);
 }
 
 void AtomicFile::commit()
 {
+  verifyWrittenFile(temporary_, target_);
   std::error_code ec;
   fs::rename(temporary_, target_, ec);
   if (ec) {
-    throw std::runtime_error("cannot move " + temporary_.string() + " onto " + target_.string() +
-                             ": " + ec.message());
+    throw MethodError("cannot move " + temporary_.string() + " onto " + target_.string() + ": " + ec.message());
   }
   committed_ = true;
+  cleanup::withdrawTemporaryPath(temporary_);
 }
 
 void writeTextFileAtomically(const fs::path& target, const std::string& text)
@@ -53,10 +97,18 @@ void writeTextFileAtomically(const fs::path& target, const std::string& text)
   {
     std::ofstream out(file.temporaryPath(), std::ios::binary);
     out << text;
+    out.flush();
     out.close();
-    if (!out) {
-      throw std::runtime_error("cannot write " + target.string());
+    std::error_code ec;
+    if (!out || fs::file_size(file.temporaryPath(), ec) != text.size() || ec) {
+      throw MethodError("cannot write " + target.string() + " (disk full or not writable?)");
     }
+  }
+  if (text.empty()) { // nothing to verify beyond the size
+    std::error_code ec;
+    fs::rename(file.temporaryPath(), target, ec);
+    if (ec) throw MethodError("cannot move " + file.temporaryPath().string() + " onto " + target.string() + ": " + ec.message());
+    return;
   }
   file.commit();
 }

@@ -2,6 +2,8 @@
 // Runs an ITK writer (image or transform) onto a path atomically, compressed where the format
 // allows. Internal to MRML's writers.
 #include "AtomicFile.h"
+#include "BrainShiftErrors.h"
+#include "LibraryMessages.h"
 
 #include <itkMacro.h>
 
@@ -18,11 +20,14 @@ void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool co
   writer->SetFileName(file.temporaryPath().string());
   writer->SetUseCompression(compress);
   try {
+    // NIfTI's library prints "** ERROR: NWAD: wrote only ..." itself and carries on; the file is
+    // verified below and the error reported once, naming it.
+    const MutedStderr muted;
     writer->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw std::runtime_error("cannot write " + path.string() + ": " + e.GetDescription());
+    throw MethodError("cannot write " + path.string() + ": " + oneLine(e.GetDescription()));
   }
-  file.commit();
+  file.commit(); // verifies the file first: NIfTI's writer does not notice a full disk
 }
 
 } // namespace brainshift

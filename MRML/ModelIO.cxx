@@ -7,6 +7,7 @@
 #include <vtkCallbackCommand.h>
 #include <vtkCommand.h>
 #include <vtkDataSetReader.h>
+#include <vtkNew.h>
 #include <vtkFieldData.h>
 #include <vtkPointData.h>
 #include <vtkPoints.h>
@@ -135,8 +136,17 @@ void writeModel(vtkPointSet* model, const fs::path& path)
   fieldData->DeepCopy(model->GetFieldData());
   tagged->SetFieldData(fieldData);
 
-  AtomicFile file(path);
+  // VTK's writers return 1 on a full disk, and crash (double free) when a large compressed write
+  // fails midway: they write into memory here, and the bytes go to the file through a checked
+  // stream, atomically.
+  bool failed = false;
+  vtkNew<vtkCallbackCommand> onError;
+  onError->SetClientData(&failed);
+  onError->SetCallback([](vtkObject*, unsigned long, void* flag, void*) { *static_cast<bool*>(flag) = true; });
+  const int display = vtkObject::GetGlobalWarningDisplay();
+  vtkObject::GlobalWarningDisplayOff();
   int written = 0;
+  std::string bytes;
   if (ext == ".vtk") {
     vtkSmartPointer<vtkDataWriter> writer;
     if (isPolyData) {
@@ -149,9 +159,11 @@ void writeModel(vtkPointSet* model, const fs::path& path)
       writer = w;
     }
     writer->SetHeader("BrainShift output. SPACE=LPS");
-    writer->SetFileName(file.temporaryPath().c_str());
+    writer->WriteToOutputStringOn();
     writer->SetFileTypeToBinary();
-    written = writer->Write();
+    writer->AddObserver(vtkCommand::ErrorEvent, onError);
+    written = writer->Write() && writer->GetErrorCode() == 0;
+    bytes = writer->GetOutputStdString();
   } else {
     auto tag = vtkSmartPointer<vtkStringArray>::New();
     tag->SetName(SpaceArrayName);
@@ -167,15 +179,16 @@ void writeModel(vtkPointSet* model, const fs::path& path)
       w->SetInputData(tagged);
       writer = w;
     }
-    writer->SetFileName(file.temporaryPath().c_str());
+    writer->WriteToOutputStringOn();
     writer->SetDataModeToBinary();
     writer->SetCompressorTypeToZLib();
-    written = writer->Write();
+    writer->AddObserver(vtkCommand::ErrorEvent, onError);
+    written = writer->Write() && writer->GetErrorCode() == 0;
+    bytes = writer->GetOutputString();
   }
-  if (!written) {
-    throw std::runtime_error("cannot write " + path.string());
-  }
-  file.commit();
+  vtkObject::SetGlobalWarningDisplay(display);
+  if (!written || failed || bytes.empty()) throw MethodError("cannot write " + path.string() + ": VTK could not encode the model");
+  writeTextFileAtomically(path, bytes); // checked, verified, renamed
 }
 
 } // namespace brainshift

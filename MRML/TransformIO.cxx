@@ -1,6 +1,7 @@
 #include "TransformIO.h"
 
 #include "AtomicItkWrite.h"
+#include "LibraryMessages.h"
 #include "FileNames.h"
 #include "VolumeIO.h"
 
@@ -83,7 +84,7 @@ SpatialTransform::Pointer readTransform(const fs::path& path)
   try {
     reader->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw InputError(path.string() + ": cannot read the transform: " + e.GetDescription());
+    throw InputError(path.string() + ": cannot read the transform: " + oneLine(e.GetDescription()));
   }
   const auto* list = reader->GetTransformList();
   if (list->empty()) {

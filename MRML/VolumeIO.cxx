@@ -1,6 +1,7 @@
 #include "VolumeIO.h"
 
 #include "AtomicItkWrite.h"
+#include "LibraryMessages.h"
 #include "FileNames.h"
 
 #include <itkCastImageFilter.h>
@@ -82,7 +83,7 @@ itk::ImageIOBase::Pointer readImageHeader(const fs::path& path, unsigned compone
     io->SetFileName(path.string());
     io->ReadImageInformation();
   } catch (const itk::ExceptionObject& e) {
-    throw InputError(path.string() + ": cannot read the image header: " + e.GetDescription());
+    throw InputError(path.string() + ": cannot read the image header: " + oneLine(e.GetDescription()));
   }
   unsigned dimensions = io->GetNumberOfDimensions();
   // A 4D file with a single volume is a 3D image.
@@ -113,7 +114,7 @@ typename TImage::Pointer readImageFile(const fs::path& path)
   try {
     reader->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw InputError(path.string() + ": cannot read the image (truncated or corrupt?): " + e.GetDescription());
+    throw InputError(path.string() + ": cannot read the image (truncated or corrupt?): " + oneLine(e.GetDescription()));
   }
   typename TImage::Pointer image = reader->GetOutput();
   image->DisconnectPipeline();
@@ -279,7 +280,7 @@ void checkSliceSpacing(const fs::path& folder, const std::vector<std::string>& f
     try {
       io->ReadImageInformation();
     } catch (const itk::ExceptionObject& e) {
-      throw InputError(files[i] + ": cannot read the DICOM header: " + e.GetDescription());
+      throw InputError(files[i] + ": cannot read the DICOM header: " + oneLine(e.GetDescription()));
     }
     const std::vector<double> row = io->GetDirection(0), column = io->GetDirection(1);
     std::array<double, 6> orientation{row[0], row[1], row[2], column[0], column[1], column[2]};
@@ -378,7 +379,7 @@ ScalarImage::Pointer readDicomSeries(const fs::path& folder, Warnings* warnings)
   try {
     reader->Update();
   } catch (const itk::ExceptionObject& e) {
-    throw InputError(folder.string() + ": cannot read the DICOM series: " + e.GetDescription());
+    throw InputError(folder.string() + ": cannot read the DICOM series: " + oneLine(e.GetDescription()));
   }
   ScalarImage::Pointer image = reader->GetOutput();
   image->DisconnectPipeline();

@@ -2,6 +2,7 @@
 #include "BrainShiftErrors.h"
 #include "Commands.h"
 #include "LandmarkEvaluation.h"
+#include "OutputFolder.h"
 
 #include <itkIdentityTransform.h>
 
@@ -37,6 +38,7 @@ void addEvaluateCommand(CLI::App& app)
     ->required();
   command->add_option("--json", options->json, "also write the result as JSON to this file");
   command->callback([options] {
+    if (!options->json.empty()) refuseOutputOverInputs(options->json, {options->landmarks, options->transform}, "--json");
     const std::vector<LandmarkPair> pairs = readLandmarksCsv(options->landmarks);
     SpatialTransform::Pointer transform;
     if (options->transform == "identity") {

@@ -1,6 +1,8 @@
 #include "RunCommands.h"
 
 #include "BrainShiftErrors.h"
+#include "LabelContract.h"
+#include "OutputFolder.h"
 #include "VolumeIO.h"
 
 #include <algorithm>
@@ -116,6 +118,7 @@ void RunContext::loadAllInputs()
   RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, options_.intraopImage, {}};
   for (const std::string& overlay : options_.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
   inputs_ = loadRegistrationInputs(paths);
+  requireKnownLabels(*inputs_->preopLabels, options_.preopLabels, configuration_);
   preopImage_ = inputs_->preopImage;
   preopLabels_ = inputs_->preopLabels;
   intraopImage_ = inputs_->intraopImage;
@@ -249,6 +252,7 @@ const LabelImage* RunContext::preopLabelsIfGiven()
   if (!preopLabels_ && !options_.preopLabels.empty()) {
     Warnings warnings;
     preopLabels_ = readLabelVolume(options_.preopLabels, &warnings);
+    requireKnownLabels(*preopLabels_, options_.preopLabels, configuration_);
     report_.addWarnings(warnings);
   }
   return preopLabels_.GetPointer();
@@ -283,6 +287,7 @@ const std::vector<PipelineStage>& pipelineStages()
 
 void runRegistration(RunContext& context)
 {
+  claimOutputFolder(context.options().outputDir); // one writer per folder; a no-op when the command did
   context.loadAllInputs();
   const nlohmann::json fingerprint = caseFingerprint(context);
   const nlohmann::json& existing = context.report().document();

@@ -1,4 +1,5 @@
 #include "BrainShiftErrors.h"
+#include "OutputFolder.h"
 #include "RunCommands.h"
 #include "VolumeIO.h"
 
@@ -31,6 +32,15 @@ void checkGivenInputs(const RunOptions& options)
   for (const std::string& overlay : options.overlays) readScalarVolume(parseOverlayArgument(overlay).file);
 }
 
+/// Before any work: the output folder is writable and this run's alone, and no input is a file the run writes.
+void claimFolderOf(const RunOptions& options)
+{
+  std::vector<fs::path> inputs{options.preopImage, options.preopLabels, options.intraopImage, options.config};
+  for (const std::string& overlay : options.overlays) inputs.push_back(parseOverlayArgument(overlay).file);
+  refuseInputsAmongOutputs(options.outputDir, inputs);
+  claimOutputFolder(options.outputDir);
+}
+
 struct StageFlags {
   unsigned required, offered;
   bool solver, mesh;
@@ -60,6 +70,7 @@ void addRegisterCommand(CLI::App& app)
   command->add_flag("--overwrite", options->overwrite, "replace another case's results in --output-dir");
   command->callback([options] {
     const Configuration configuration = configurationFor(*options);
+    claimFolderOf(*options);
     RunReport report(options->outputDir / "report.json");
     RunContext context(*options, configuration, report);
     runRegistration(context);
@@ -76,6 +87,7 @@ void addStageCommands(CLI::App& app)
                   stage.name == "classify" || stage.name == "refine");
     command->callback([options, stage] {
       const Configuration configuration = configurationFor(*options);
+      claimFolderOf(*options);
       checkGivenInputs(*options);
       if (!stage.run) {
         throw NotAvailableError("stage '" + stage.name + "' is not available yet in this build");

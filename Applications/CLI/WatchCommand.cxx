@@ -11,6 +11,7 @@
 #include "Commands.h"
 #include "DicomSeriesExport.h"
 #include "UpdateFolder.h"
+#include "OutputFolder.h"
 #include "RunCommands.h"
 #include "RunReport.h"
 
@@ -105,6 +106,7 @@ void runWatch(const WatchOptions& o)
   if (o.scans.empty() == o.watchFolder.empty()) throw InputError("watch: give either --scans or --watch-dir");
   if (!(o.pollSeconds > 0 && o.pollSeconds <= 60)) throw InputError("--poll-seconds must be within 0 and 60");
   const Configuration configuration = configurationFor(o.run);
+  claimOutputFolder(o.run.outputDir); // before the earlier session's check: one session per folder
   std::error_code ec;
   const fs::path summaryFile = o.run.outputDir / "watch.json";
   if (fs::exists(summaryFile, ec)) { // an earlier session's scans: kept unless told otherwise

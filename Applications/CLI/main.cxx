@@ -2,11 +2,15 @@
 // usage or bad input, 1 on a failure of the method; one line on stderr says why.
 #include "BrainShiftErrors.h"
 #include "Commands.h"
+#include "LibraryDiagnostics.h"
+#include "SignalHandling.h"
 
 #include <iostream>
 
 int main(int argc, char** argv)
 {
+  brainshift::cli::installSignalHandling(); // before any thread: signals end the run cleanly (128 + signal)
+  brainshift::cli::silenceLibraryDiagnostics(); // one line per error: ours, naming the file
   CLI::App app{"BrainShift: biomechanical simulation of brain shift for image-guided neurosurgery.\n"
                "Brings preoperative MRI, fMRI and segmentations into the brain's shape on each intraoperative MRI.",
                "brainshift"};

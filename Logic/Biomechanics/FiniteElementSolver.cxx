@@ -1,6 +1,7 @@
 #include "FiniteElementSolver.h"
 
 #include "BrainShiftErrors.h"
+#include "ProcessCleanup.h"
 
 #include <chrono>
 #include <cmath>
@@ -43,7 +44,10 @@ struct TemporaryFolder {
   ~TemporaryFolder()
   {
     std::error_code ignored;
-    if (owned) fs::remove_all(path, ignored);
+    if (owned) {
+      fs::remove_all(path, ignored);
+      cleanup::withdrawTemporaryPath(path);
+    }
   }
 };
 
@@ -112,6 +116,7 @@ public:
       ::_exit(127);
     }
     ::setpgid(child_, child_);
+    cleanup::addProcessGroup(child_); // a signal to the caller ends the worker too
     ::close(in[0]);
     ::close(out[1]);
     ::close(err[1]);
@@ -126,6 +131,7 @@ public:
   {
     if (!exited_) stop("");
     ::kill(-child_, SIGKILL); // no orphaned ranks, even after a normal exit
+    cleanup::withdrawProcessGroup(child_);
     ::close(input_);
     ::close(output_);
     ::close(error_);
@@ -198,6 +204,9 @@ public:
     if (WIFSIGNALED(status_)) {
       throw MethodError("the finite element worker died (signal " + std::to_string(WTERMSIG(status_)) + ")" + stderrSummary());
     }
+    if (WIFEXITED(status_) && WEXITSTATUS(status_) == 2) { // the worker refused its job: the options
+      throw InputError("the finite element worker refused the job" + stderrSummary());
+    }
     if (!WIFEXITED(status_) || WEXITSTATUS(status_) != 0) {
       throw MethodError("the finite element worker failed (exit " + std::to_string(WEXITSTATUS(status_)) + ")" + stderrSummary());
     }
@@ -253,6 +262,16 @@ void requireWorker(const FiniteElementRunOptions& options)
   }
 }
 
+/// The job file for the worker; a failed write (a full disk) is the run's failure, named.
+void writeJobFor(const FiniteElementJob& job, const fs::path& file)
+{
+  try {
+    writeFiniteElementJob(job, file);
+  } catch (const std::runtime_error& e) {
+    throw MethodError(std::string("the finite element job: ") + e.what() + " (disk full or not writable?)");
+  }
+}
+
 TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
 {
   TemporaryFolder folder;
@@ -261,6 +280,7 @@ TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
     if (!::mkdtemp(pattern)) throw MethodError(std::string("cannot create a work folder: ") + std::strerror(errno));
     folder.path = pattern;
     folder.owned = true;
+    cleanup::addTemporaryPath(folder.path);
   } else {
     folder.path = options.workFolder;
     fs::create_directories(folder.path);
@@ -278,7 +298,7 @@ FiniteElementResult solveWithWorker(const FiniteElementJob& job, const FiniteEle
   const fs::path jobFile = folder.path / "job.bsfe", resultFile = folder.path / "result.bsfe";
   std::error_code ec;
   fs::remove(resultFile, ec);
-  writeFiniteElementJob(job, jobFile);
+  writeJobFor(job, jobFile);
   WorkerProcess worker(options, {jobFile.string(), resultFile.string()});
   const auto start = Clock::now();
   while (worker.readLine(options.timeoutSeconds - std::chrono::duration<double>(Clock::now() - start).count())) {
@@ -309,7 +329,7 @@ FiniteElementSession::FiniteElementSession(const FiniteElementJob& job, FiniteEl
   impl_->options = std::move(options);
   impl_->folder = workFolderFor(impl_->options);
   const fs::path jobFile = impl_->folder.path / "job.bsfe";
-  writeFiniteElementJob(job, jobFile);
+  writeJobFor(job, jobFile);
   impl_->fixedPart.fixedNodes = job.fixedNodes;
   impl_->prepared = job;
   impl_->worker = std::make_unique<WorkerProcess>(impl_->options, std::vector<std::string>{"--serve", jobFile.string()});
@@ -371,7 +391,7 @@ FiniteElementResult FiniteElementSession::solve(const std::vector<double>& fixed
   const fs::path resultFile = impl_->folder.path / ("result-" + std::to_string(n) + ".bsfe");
   FiniteElementJob values = impl_->fixedPart;
   values.fixedDisplacements = fixedDisplacements;
-  writeFiniteElementJob(values, valuesFile);
+  writeJobFor(values, valuesFile);
   impl_->worker->writeLine("solve " + valuesFile.string() + " " + resultFile.string());
   const auto answer = impl_->worker->readLine(impl_->options.timeoutSeconds);
   if (!answer) {

@@ -63,7 +63,8 @@ struct Configuration {
   unsigned surfaceMaximumIterations = 200;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
-  /// unknown keys, a Poisson ratio outside [0, 0.5), a non-positive modulus, and the like.
+  /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a
+  /// Young's modulus outside 1 Pa to 1e9 Pa, and the like.
   static Configuration load(const std::filesystem::path& path);
 
   /// Checks the values; `source` names where they came from in the error message.

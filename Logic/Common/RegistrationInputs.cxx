@@ -21,6 +21,13 @@ OverlayInput parseOverlayArgument(const std::string& text)
       throw InputError("--overlay '" + text + "': the name may hold letters, digits, '-' and '_' only");
     }
   }
+  // warped_<NAME>.nii.gz must not replace a built-in output (warped_preop_image.nii.gz, ...).
+  for (const char* builtIn : {"preop_image", "preop_labels", "intraop_image", "intraop_labels"}) {
+    if (overlay.name == builtIn) {
+      throw InputError("--overlay '" + text + "': the name " + overlay.name + " is taken by a built-in output (warped_" +
+                       overlay.name + ".nii.gz); choose another name");
+    }
+  }
   return overlay;
 }
 

@@ -11,13 +11,15 @@
 // chosen by measurement, by size and by whether the problem is served) unless the job's options
 // say otherwise. The
 // convergence reason is checked. Progress goes to stdout as "progress <stage> <fraction>" lines.
-// Exit status: 0 solved, 2 bad job, 3 the solver did not converge, 1 anything else.
+// Exit status: 0 solved, 2 bad job (options PETSc refuses or never reads included), 3 the solver
+// did not converge or its solution does not satisfy the equations (true residual), 1 anything else.
 #include "FiniteElementJob.h"
 
 #include <petscksp.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <numeric>
@@ -170,6 +172,9 @@ Numbering partitionNodes(const FiniteElementJob& job, int rank, int size)
 ///   for a third less time than at 1e-6.
 constexpr std::int64_t kSmallProblemLimit = 300000;
 constexpr double kRelativeTolerance = 1e-5;
+/// The true relative residual may exceed the solver's tolerance by this factor (the solver
+/// watches the preconditioned residual).
+constexpr double kResidualSlack = 10;
 
 void setTunedDefault(KSP ksp, PC pc, std::int64_t equations, int ranks, bool served)
 {
@@ -317,7 +322,7 @@ public:
     PC pc;
     check(KSPGetPC(ksp_, &pc), "KSPGetPC");
     setTunedDefault(ksp_, pc, result_.equations, size, served);
-    check(KSPSetFromOptions(ksp_), "KSPSetFromOptions");
+    if (KSPSetFromOptions(ksp_)) throw WorkerFailure(2, "the solver options are refused (" + job.solverOptions + ")");
     KSPType kspType;
     PCType pcType;
     check(KSPGetType(ksp_, &kspType), "KSPGetType");
@@ -349,6 +354,7 @@ public:
     }
     result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
     check(MatCreateVecs(A_, &x_, &b_), "MatCreateVecs");
+    if (served) requireEveryOptionRead(true);
   }
 
   ~PreparedProblem()
@@ -418,6 +424,7 @@ public:
                                " after " + std::to_string(result.iterations) + " iterations, relative residual " +
                                std::to_string(result.relativeResidual));
     }
+    requireTrueResidual(result);
     // The imposed values exactly (the solver met them only to its tolerance).
     for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
     check(VecAssemblyBegin(x_), "VecAssemblyBegin");
@@ -447,6 +454,57 @@ public:
 
 private:
   bool mine(PetscInt newNode) const { return newNode >= first_ && newNode < first_ + owned_; }
+
+  /// Whatever reason PETSc gives (a Richardson run stopped by -ksp_max_it, a NaN from absurd
+  /// moduli), the solution must satisfy the equations: the true relative residual within the
+  /// solver's tolerance, with kResidualSlack for the gap between the preconditioned residual
+  /// the solver watched and the true one.
+  void requireTrueResidual(const FiniteElementResult& result) const
+  {
+    PetscReal rtol = kRelativeTolerance, abstol = 0, dtol = 0;
+    PetscInt maxits = 0;
+    check(KSPGetTolerances(ksp_, &rtol, &abstol, &dtol, &maxits), "KSPGetTolerances");
+    const double allowed = std::max(double(rtol), 1e-12) * kResidualSlack;
+    if (!std::isfinite(result.relativeResidual) || !(result.relativeResidual <= allowed)) {
+      char text[256];
+      std::snprintf(text, sizeof text, "the solution does not satisfy the equations: true relative residual %.3g, above %.3g "
+                    "(%g times the tolerance %.3g); the solver (%s) stopped after %d iterations with KSP reason %d",
+                    result.relativeResidual, allowed, kResidualSlack, double(rtol), result.solver.c_str(), result.iterations,
+                    result.convergedReason);
+      throw WorkerFailure(3, text);
+    }
+  }
+
+public:
+  /// Every solver option given was read by PETSc: a misspelt or unknown one (-ksp_typo) would
+  /// otherwise be ignored in silence. `beforeSolve`: the options PETSc reads only in KSPSolve
+  /// (views, monitors of the reason) are still to come and not counted. A direct solve (preonly)
+  /// meets any tolerance: its tolerances and iteration limits, unread, are not counted either.
+  void requireEveryOptionRead(bool beforeSolve) const
+  {
+    KSPType type;
+    check(KSPGetType(ksp_, &type), "KSPGetType");
+    const bool direct = std::string(type) == KSPPREONLY;
+    PetscInt count = 0;
+    char** names = nullptr;
+    char** values = nullptr;
+    check(PetscOptionsLeftGet(nullptr, &count, &names, &values), "PetscOptionsLeftGet");
+    std::string unread;
+    for (PetscInt i = 0; i < count; ++i) {
+      const std::string name = names[i];
+      if (name == "-serve") continue; // the worker's own argument (--serve JOB), which PETSc also parses
+      if (direct && (name == "ksp_rtol" || name == "ksp_atol" || name == "ksp_divtol" || name == "ksp_max_it")) continue;
+      if (beforeSolve && (name.rfind("ksp_view", 0) == 0 || name.rfind("ksp_converged_reason", 0) == 0)) continue;
+      unread += (unread.empty() ? "-" : ", -") + name + (values[i] ? std::string(" ") + values[i] : std::string());
+    }
+    check(PetscOptionsLeftRestore(nullptr, &count, &names, &values), "PetscOptionsLeftRestore");
+    if (!unread.empty()) {
+      throw WorkerFailure(2, "unknown or unused solver option " + unread +
+                               " (not a PETSc option of this solver; see the KSP and PC manual pages)");
+    }
+  }
+
+private:
 
   /// Zeroes the rows and columns of the fixed dofs of A (1 on the diagonal), keeping it symmetric.
   void eliminate(const std::vector<std::int32_t>& fixedNodes)
@@ -556,6 +614,7 @@ int main(int argc, char** argv)
     } else {
       PreparedProblem problem(job, rank, size, false);
       const FiniteElementResult result = problem.solveFor(job.fixedDisplacements);
+      problem.requireEveryOptionRead(false);
       if (rank == 0) writeFiniteElementResult(result, argv[2]);
     }
   } catch (const WorkerFailure& e) {
