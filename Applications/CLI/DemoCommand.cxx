@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <set>
 
 namespace brainshift::cli {
@@ -188,6 +189,9 @@ void addDemoCommand(CLI::App& app)
     run.overlays = {"fmri=" + files.preopFmri.string()};
     RunContext context(run, configuration, report);
     bool pipelineComplete = false;
+    // A non-rigid update the trust assessment rejected has been replaced by the rigid result in
+    // every file: the demo still evaluates it (and the update set aside), then fails with its reason.
+    std::optional<MethodError> rejected;
     try {
       runRegistration(context);
       pipelineComplete = true;
@@ -197,7 +201,11 @@ void addDemoCommand(CLI::App& app)
     } catch (const MethodError& e) {
       report.addWarning(e.what());
       report.save();
-      throw;
+      const json& document = report.document();
+      const bool fellBack = document.contains("stages") && document["stages"].contains("warp") &&
+                            document["stages"]["warp"].value("rigid_fallback", false);
+      if (!fellBack) throw;
+      rejected = e;
     }
 
     // Evaluation against the truth.
@@ -207,7 +215,8 @@ void addDemoCommand(CLI::App& app)
     transforms["truth_rigid"] = evaluationOf(*simulated.rigidIntraopToPreop, simulated.landmarks);
     transforms["truth"] = evaluationOf(*simulated.intraopToPreop, simulated.landmarks);
     for (const auto& [key, file] : {std::pair<std::string, fs::path>{"brainshift_rigid", out / "rigid_intraop_to_preop.tfm"},
-                                    {"brainshift", out / "intraop_to_preop.h5"}}) {
+                                    {"brainshift", out / "intraop_to_preop.h5"},
+                                    {"brainshift_rejected_update", out / "rejected_intraop_to_preop.h5"}}) {
       if (fs::exists(file, ec)) transforms[key] = evaluationOf(*readTransform(file), simulated.landmarks);
     }
     json evaluation = {{"landmarks", "case/landmarks.csv"},
@@ -261,6 +270,7 @@ void addDemoCommand(CLI::App& app)
                   it.value()["p95_mm"].get<double>(), it.value()["max_mm"].get<double>());
     }
     std::printf("wrote %s (report.json, evaluation.json, case/)\n", out.c_str());
+    if (rejected) throw *rejected;
   });
 }
 

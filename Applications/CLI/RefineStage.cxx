@@ -141,6 +141,19 @@ void runRefineStage(RunContext& context)
   bool settled = false;
   // The first classification (through the rigid prior) stays where the solve moved nothing.
   const LabelImage::Pointer anchor = readLabelVolume(context.output("intraop_labels.nii.gz"));
+  // What the first pass did once for the whole scan stays said in its stages' entries.
+  const nlohmann::json firstSurface = context.report().hasStage("surface") ? context.report().stage("surface") : nlohmann::json::object();
+  const nlohmann::json firstSimulate = context.report().hasStage("simulate") ? context.report().stage("simulate") : nlohmann::json::object();
+  auto keepFirstPassFacts = [&] {
+    nlohmann::json surface = context.report().stage("surface");
+    for (const char* key : {"preop_boundary_from", "preop_boundary_seconds"}) {
+      if (firstSurface.contains(key)) surface[key] = firstSurface[key];
+    }
+    context.report().setStage("surface", surface);
+    nlohmann::json simulate = context.report().stage("simulate");
+    if (firstSimulate.value("worker_prepared", false)) simulate["worker_prepared"] = true;
+    context.report().setStage("simulate", simulate);
+  };
   try {
     for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
       Stopwatch passClock;
@@ -151,6 +164,7 @@ void runRefineStage(RunContext& context)
       runClassifyStage(context);
       runSurfaceStage(context);
       runSimulateStage(context);
+      keepFirstPassFacts();
       const DisplacementChange change = changeBetween(before, imposedDisplacements(context.output("brain_surface.vtp")));
       settled = change.meanMm < tolerance;
       const nlohmann::json& classify = context.report().stage("classify");

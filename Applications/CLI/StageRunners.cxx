@@ -104,7 +104,10 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
           {"fluid_median", finite(e.fluidMedian)},
           {"parenchyma_median", finite(e.parenchymaMedian)},
           {"intraop_relative", finite(e.intraopRelative)},
-          {"preop_relative", finite(e.preopRelative)}};
+          {"preop_relative", finite(e.preopRelative)},
+          {"fluid_like_share", e.fluidLikeShare},
+          {"tumour_like_share", e.tumourLikeShare},
+          {"parenchyma_like_share", e.parenchymaLikeShare}};
 }
 } // namespace
 
@@ -392,6 +395,8 @@ void runSurfaceStage(RunContext& context)
   parameters.bendingWeight = configuration.surfaceBendingWeight;
   parameters.imageWeight = configuration.surfaceImageWeight;
   parameters.maximumIterations = configuration.surfaceMaximumIterations;
+  parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
+  parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
   names.labels = labelsFile.string();
@@ -432,6 +437,7 @@ void runSurfaceStage(RunContext& context)
                                         {"flipped_triangles", result.flippedTriangles},
                                         {"sinking_direction", result.sinkingDirection},
                                         {"directional_nodes", result.directionalNodes},
+                                        {"unsnapped_nodes", result.unsnappedNodes},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
                                         {"preop_boundary_from", previousSurface ? previousSurfaceFile->string() : std::string()},
                                         {"target_seconds", result.targetSeconds},

@@ -421,6 +421,9 @@ struct FitOutcome {
   Eigen::MatrixXd positions;
   std::vector<double> residuals; ///< |distance to the target boundary| at the end
   std::vector<bool> imageUsed;
+  /// Whether the segmentation's boundary showed the expected contrast at the node (1), not (0), or
+  /// was not checked (-1: no image term).
+  std::vector<signed char> plausible;
   unsigned iterations = 0;
   bool converged = false;
 };
@@ -570,6 +573,7 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
   }
   out.iterations = std::min(out.iterations, p.maximumIterations);
   out.positions = rest + v;
+  out.plausible = edges ? plausible : std::vector<signed char>(std::size_t(n), -1);
   return out;
 }
 } // namespace
@@ -597,15 +601,19 @@ SinkingDirectionMatch matchAlongSinkingDirection(const Eigen::MatrixXd& rest, co
   match.targets.used.assign(n, false);
   match.targets.points.assign(n, Vec::Zero());
   Vec sum = Vec::Zero();
+  double lengths = 0;
   std::size_t moving = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const Vec u = (closest.positions.row(Eigen::Index(i)) - rest.row(Eigen::Index(i))).transpose();
     if (freeReason[i] == 0 && u.norm() > p.sinkingNodeMm) {
       sum += u;
+      lengths += u.norm();
       ++moving;
     }
   }
-  if (moving < p.sinkingMinimumNodes || sum.norm() < 0.5 * double(moving) * p.sinkingNodeMm) return match; // no common sinking
+  // A common sinking: enough nodes moved, and their moves agree in direction (a swelling or a
+  // uniform shrinking has none).
+  if (moving < p.sinkingMinimumNodes || sum.norm() < p.sinkingCoherence * lengths) return match;
   match.direction = sum.normalized();
   const Vec& d = match.direction;
   const double step = 0.25;
@@ -641,6 +649,25 @@ SinkingDirectionMatch matchAlongSinkingDirection(const Eigen::MatrixXd& rest, co
     ++match.matched;
   }
   return match;
+}
+
+/// The membrane carries each node to its counterpart, and its equilibrium leaves the node short of
+/// the boundary by the membrane's own pull (about 1 mm at the bottom of a 20 mm sink on a 4 mm
+/// mesh): the correspondence is the membrane's, the position the boundary's. Each node matched
+/// along the sinking direction is put on its point. The closest-point nodes stay where the membrane
+/// left them: pinned to the segmentation's boundary they follow its errors (on a sphere whose cap
+/// the segmentation eroded by 4 mm, the cap's error grew from 0.88 to 1.25 mm). Nodes left free, or
+/// placed by the image term, or where the segmentation did not show the expected contrast, stay.
+void snapOntoBoundary(FitOutcome& fit, const PointTargets& targets, const std::vector<unsigned char>& freeReason,
+                      const ActiveSurfaceParameters& p)
+{
+  for (Eigen::Index i = 0; i < fit.positions.rows(); ++i) {
+    const std::size_t node = std::size_t(i);
+    // Only where the segmentation showed the expected contrast: a boundary the image doubts is no
+    // place to pin a node on.
+    if (freeReason[node] != 0 || fit.imageUsed[node] || fit.residuals[node] > p.unmatchedResidualMm || fit.plausible[node] == 0) continue;
+    if (!targets.used.empty() && targets.used[node]) fit.positions.row(i) = targets.points[node].transpose();
+  }
 }
 
 void ActiveSurfaceParameters::validate() const
@@ -848,8 +875,9 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   const std::vector<double> initialResiduals = residualsAt(initialPositions, distanceField, toIndex);
   FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
   result.iterations = fit.iterations;
+  SinkingDirectionMatch along;
   if (p.matchAlongSinkingDirection) {
-    const SinkingDirectionMatch along = matchAlongSinkingDirection(preopBoundary, fit, distanceField, toIndex, freeReason, p);
+    along = matchAlongSinkingDirection(preopBoundary, fit, distanceField, toIndex, freeReason, p);
     result.sinkingDirection = {along.direction[0], along.direction[1], along.direction[2]};
     result.directionalNodes = along.matched;
     if (along.matched > 0) {
@@ -903,6 +931,30 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   result.p95ResidualMm = percentile(residuals, 0.95);
   result.maxResidualMm = *std::max_element(residuals.begin(), residuals.end());
 
+  if (p.snapToBoundary) {
+    const Eigen::MatrixXd membranePositions = fit.positions;
+    snapOntoBoundary(fit, along.targets, freeReason, p);
+    // Where putting nodes on the boundary turns a triangle over (two neighbours matched to points
+    // of a rough boundary far apart), the three keep the membrane's positions; again, until none does.
+    std::vector<Vec> from(n), to(n);
+    for (std::size_t i = 0; i < n; ++i) from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
+    for (int round = 0; round < 5; ++round) {
+      for (std::size_t i = 0; i < n; ++i) to[i] = fit.positions.row(Eigen::Index(i)).transpose();
+      std::size_t reverted = 0;
+      for (const auto& t : topology.triangles) {
+        const bool flipped = triangleNormal(from, t).dot(triangleNormal(to, t)) <= 0;
+        if (!flipped) continue;
+        for (vtkIdType corner : t) {
+          if ((fit.positions.row(corner) - membranePositions.row(corner)).norm() > 0) {
+            fit.positions.row(corner) = membranePositions.row(corner);
+            ++reverted;
+          }
+        }
+      }
+      result.unsnappedNodes += reverted;
+      if (reverted == 0) break;
+    }
+  }
   const Eigen::MatrixXd u = fit.positions - preopBoundary;
   std::vector<Vec> from(n), to(n);
   for (std::size_t i = 0; i < n; ++i) {

@@ -73,9 +73,13 @@ struct ActiveSurfaceParameters {
   bool matchAlongSinkingDirection = true;
   double sinkingNodeMm = 2.0;          ///< nodes moved farther than this by the closest-point fit estimate the direction
   std::size_t sinkingMinimumNodes = 20; ///< fewer such nodes: no common sinking, closest points only
+  double sinkingCoherence = 0.5;       ///< |sum of their moves| / sum of |moves| below this: no common direction
   double directionalNodeMm = 0.5;      ///< nodes moved farther than this are matched along the direction
   double directionalMinimumCosine = 0.35; ///< and only where their normal is this close to it
   double directionalSearchMm = 10.0;   ///< how far the line's crossing may lie from the closest-point fit's
+  /// Put each matched node on the boundary at the end (snapOntoBoundary in the .cxx) rather than
+  /// where the membrane's equilibrium leaves it, short of the boundary.
+  bool snapToBoundary = false;
   std::vector<int> brainLabels{2, 3, 4}; ///< the mesh tissues whose union is the brain
   int tumourLabel = 4;
   void validate() const;
@@ -99,6 +103,7 @@ struct ActiveSurfaceResult {
   std::size_t flippedTriangles = 0;  ///< triangles whose orientation reversed (should be none)
   std::array<double, 3> sinkingDirection{}; ///< the common direction estimated (model frame; 0: none)
   std::size_t directionalNodes = 0;  ///< nodes matched along it
+  std::size_t unsnappedNodes = 0;    ///< nodes kept at the membrane's position (snapping would turn a triangle over)
   /// The fit to the preoperative boundary (mesh and preoperative labels only: could be prepared
   /// before surgery), the intraoperative target's distance map, the intraoperative iterations.
   double preopBoundarySeconds = 0, targetSeconds = 0, iterationSeconds = 0;

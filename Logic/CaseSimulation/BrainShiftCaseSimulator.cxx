@@ -395,7 +395,7 @@ double fluidLevel(const Grid& g, const std::vector<unsigned char>& matter, Matte
 /// The intensities of the intraoperative-only matter in the deformed image: the gap (one dark
 /// value, or CSF-like fluid under air with a level set by gravity) and the resection cavity (fluid,
 /// air above its own level, and a bright rim of blood products on its wall when asked).
-void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3& axis, double csfMean, double whiteMean,
+void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3& axis, double fluidValue, double whiteMean,
                               const std::vector<unsigned char>& matter, float* image, CaseFigures& figures)
 {
   const bool fluidAndAir = P.gap == GapContent::FluidAndAir;
@@ -412,11 +412,11 @@ void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3
   for (std::size_t i = 0; i < matter.size(); ++i) {
     if (matter[i] == Gap) {
       const bool air = fluidAndAir && dot(G.pointOf(i), up) > gapLevel;
-      image[i] = fluidAndAir ? (air ? 0.0f : float(csfMean)) : float(0.6 * csfMean);
+      image[i] = fluidAndAir ? (air ? 0.0f : float(fluidValue)) : float(0.6 * fluidValue);
       if (air) figures.gapAirMl += voxelMl;
     } else if (matter[i] == Cavity) {
       const bool air = fluidAndAir && dot(G.pointOf(i), up) > cavityLevel;
-      image[i] = air ? 0.0f : float(csfMean);
+      image[i] = air ? 0.0f : float(fluidValue);
       if (air) figures.cavityAirMl += voxelMl;
       if (!air && toCavityWall && toCavityWall->GetBufferPointer()[i] >= -1.5f) image[i] = float(1.25 * whiteMean);
     }
@@ -932,7 +932,20 @@ SimulatedCase simulateCase(const CaseParameters& P)
     dLabels[i] = labels[i];
     dImage[i] = preop[i];
   });
-  fillIntraoperativeMatter(P, G, axis, csfMean, whiteMean, matter, dImage, figures);
+  // The fluid under the craniotomy and in the cavity is CSF and saline: as dark as the ventricles'
+  // CSF (the built-in case's dark gap and cavity keep their historical value, the CSF class mean).
+  double fluidValue = csfMean;
+  if (P.gap == GapContent::FluidAndAir) {
+    std::vector<float> ventricular;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (labels[i] == Ventricles) ventricular.push_back(preop[i]);
+    }
+    if (!ventricular.empty()) {
+      std::nth_element(ventricular.begin(), ventricular.begin() + std::ptrdiff_t(ventricular.size() / 2), ventricular.end());
+      fluidValue = ventricular[ventricular.size() / 2];
+    }
+  }
+  fillIntraoperativeMatter(P, G, axis, fluidValue, whiteMean, matter, dImage, figures);
   // -- The patient in the scanner: intraop point y = M(x'); the truth maps y back.
   auto motion = itk::Euler3DTransform<double>::New();
   {

@@ -164,7 +164,14 @@ Configuration Configuration::load(const fs::path& path)
   if (document.contains("surface")) {
     const json& c = document["surface"];
     if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
-    requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations"}, file + ": surface");
+    requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
+                         "snap_to_boundary"}, file + ": surface");
+    for (const auto& [key, target] : {std::pair<const char*, bool*>{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
+                                      {"snap_to_boundary", &configuration.surfaceSnapToBoundary}}) {
+      if (!c.contains(key)) continue;
+      if (!c[key].is_boolean()) throw InputError(file + ": surface." + key + " must be true or false");
+      *target = c[key].get<bool>();
+    }
     if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");
     if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
     if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");

@@ -50,7 +50,7 @@ struct Configuration {
   /// after a solve the preoperative labels warped by it become the spatial prior, and the
   /// classification, the surface and the solve run again, at most this many times more, until the
   /// imposed surface displacement changes by less than the tolerance (mean over its nodes).
-  unsigned classificationRefinementPasses = 2;
+  unsigned classificationRefinementPasses = 0;
   double classificationRefinementToleranceMm = 0.25;
   /// A refine pass reclassifies only within this distance of where the solve moved the tissue by
   /// more than 1 mm, and keeps the first classification elsewhere (0: everywhere).
@@ -61,6 +61,10 @@ struct Configuration {
   double surfaceBendingWeight = 0.2;
   double surfaceImageWeight = 0.0;
   unsigned surfaceMaximumIterations = 200;
+  /// Nodes that moved matched along the brain's common sinking direction, not to the closest point;
+  /// matched nodes put on the boundary at the end (ActiveSurfaceLogic.h).
+  bool surfaceMatchAlongSinkingDirection = true;
+  bool surfaceSnapToBoundary = false;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a

@@ -346,20 +346,41 @@ TumourResectionEvidence tumourResectionEvidence(std::map<LabelPixel, std::vector
   e.intraopRelative = std::abs(span) > 1e-6 ? (e.tumourMedian - e.fluidMedian) / span : std::nan("");
   e.preopRelative = P.preopTumourContrast;
   e.decidedBy = P.tumourResection == TumourResection::Auto ? "image" : "user";
+  // Each tumour prototype votes for what it looks like most: fluid, the tumour as it looked before
+  // surgery (its place between fluid and parenchyma then; without it, the parenchyma), or the
+  // parenchyma (tissue the rigid prior misplaced: no vote on the tumour).
+  if (std::isfinite(span) && std::abs(span) > 1e-6) {
+    const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
+    const double expected = e.fluidMedian + before * span;
+    std::size_t fluid = 0, tumour = 0, parenchyma = 0;
+    for (float v : prototypeIntensity[Tumour]) {
+      const double toFluid = std::abs(v - e.fluidMedian), toTumour = std::abs(v - expected), toParenchyma = std::abs(v - e.parenchymaMedian);
+      if (toFluid <= toTumour && toFluid <= toParenchyma) ++fluid;
+      else if (toTumour <= toParenchyma) ++tumour;
+      else ++parenchyma;
+    }
+    const double all = double(std::max<std::size_t>(1, fluid + tumour + parenchyma));
+    e.fluidLikeShare = double(fluid) / all;
+    e.tumourLikeShare = double(tumour) / all;
+    e.parenchymaLikeShare = double(parenchyma) / all;
+  }
   return e;
 }
 
-/// Resected when the tumour's place now looks like fluid rather than like the tumour did before
-/// surgery (its place between fluid and parenchyma then); without that, like fluid rather than
-/// parenchyma. A tumour that looked like fluid before surgery cannot be told from its cavity by
-/// intensity: it is kept (the safe side: its surface is not freed).
+/// Resected when more of the tumour's prototypes look like fluid than like the tumour did before
+/// surgery. A tumour that looked like fluid before surgery (within 0.15 of the way to the
+/// parenchyma) cannot be told from its cavity by intensity: it is kept (the safe side: the
+/// classification keeps it as tissue).
 bool decideTumourResection(const TumourResectionEvidence& e, TumourResection told)
 {
   if (told != TumourResection::Auto) return told == TumourResection::Resected;
   if (!std::isfinite(e.intraopRelative)) return false;
   const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
   if (before < 0.15) return false;
-  return std::abs(e.intraopRelative) < std::abs(e.intraopRelative - before);
+  // A tumour that looked like the parenchyma (enhancing, isointense) cannot be told from the
+  // tissue the rigid prior put in its place: a cavity shows as fluid in a good share of it.
+  if (std::abs(1.0 - before) < 0.25) return e.fluidLikeShare >= 0.35;
+  return e.fluidLikeShare > e.tumourLikeShare;
 }
 
 } // namespace
@@ -791,9 +812,9 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   if (result.tumourResected && result.tumourEvidence.decidedBy == "image") {
     std::ostringstream w;
     w.precision(2);
-    w << "classify: the tumour looks resected (where it lies it is " << result.tumourEvidence.intraopRelative
-      << " of the way from fluid to parenchyma, against " << result.tumourEvidence.preopRelative
-      << " before surgery); --tumour-resected no if it is not";
+    w << "classify: the tumour looks resected (" << std::lround(100 * result.tumourEvidence.fluidLikeShare)
+      << " % of its prototypes look like fluid, " << std::lround(100 * result.tumourEvidence.tumourLikeShare)
+      << " % like the tumour before surgery); --tumour-resected no if it is not";
     result.warnings.push_back(w.str());
   }
   return result;

@@ -49,10 +49,12 @@ double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImag
 
 /// What the resection decision saw: the medians of the intraoperative intensity (0-100 scale) at
 /// the tumour's, the ventricles' and the parenchyma's prototypes, the tumour's place between fluid
-/// (0) and parenchyma (1) now and before surgery, and who decided.
+/// (0) and parenchyma (1) now and before surgery, the shares of the tumour's prototypes nearest the
+/// fluid, the tumour's own expected intensity and the parenchyma, and who decided.
 struct TumourResectionEvidence {
   double tumourMedian = 0, fluidMedian = 0, parenchymaMedian = 0;
   double intraopRelative = 0, preopRelative = 0;
+  double fluidLikeShare = 0, tumourLikeShare = 0, parenchymaLikeShare = 0;
   std::string decidedBy; ///< "image" or "user"; empty without a tumour
 };
 

@@ -1,0 +1,62 @@
+// Whether the tumour was resected, decided from the image where the aligned tumour lies, both ways,
+// on the small built-in case with a hypointense tumour seen by a low-field scanner (where the
+// tumour's intensity is nearer the fluid's than the parenchyma's, so a rule "looks like fluid:
+// resected" declares an intact tumour resected): the preoperative tumour's own place between fluid
+// and parenchyma is the reference. The user's word (yes / no) overrides the image.
+#include "BrainShiftTestingSupport.h"
+#include "TissueClassificationTestSupport.h"
+
+#include <cmath>
+
+namespace {
+using namespace brainshift;
+
+testing::ClassifiedCase lowFieldCase(bool resection)
+{
+  CaseParameters parameters;
+  parameters.size = CaseSize::Small;
+  parameters.resection = resection;
+  parameters.tumourAppearance = TumourAppearance::Hypointense;
+  parameters.contrast = IntraopContrast::LowFieldT1;
+  parameters.gap = GapContent::FluidAndAir;
+  parameters.shiftMillimetres = 5.0;
+  testing::ClassifiedCase c{simulateCase(parameters), nullptr};
+  c.rigid = registerRigidly(*c.simulated.intraopImage, *c.simulated.preopImage, c.simulated.preopLabels, {}).intraopToPreop;
+  return c;
+}
+} // namespace
+
+int TissueClassificationTumourDecisionTest(int, char*[])
+{
+  return brainshift::testing::runTest("TissueClassificationTumourDecisionTest", [] {
+    using namespace brainshift;
+    BS_CHECK(toString(tumourResectionFromString("yes")) == "yes");
+    BS_CHECK_THROWS(tumourResectionFromString("maybe"), InputError, "yes, no, auto");
+    for (bool resection : {true, false}) {
+      const testing::ClassifiedCase c = lowFieldCase(resection);
+      TissueClassificationParameters parameters;
+      parameters.preopTumourContrast = preoperativeTumourContrast(*c.simulated.preopImage, *c.simulated.preopLabels);
+      // A hypointense tumour: between the fluid (0) and the parenchyma (1), nearer the fluid.
+      BS_CHECK_MSG(parameters.preopTumourContrast > 0.15 && parameters.preopTumourContrast < 0.6, parameters.preopTumourContrast);
+      const TissueClassificationResult result =
+        classifyTissues(*c.simulated.intraopImage, *c.simulated.preopLabels, *c.rigid, std::nullopt, parameters);
+      const TumourResectionEvidence& e = result.tumourEvidence;
+      std::cout << (resection ? "resected" : "in place") << ": fluid-like " << e.fluidLikeShare << ", tumour-like " << e.tumourLikeShare << "; tumour " << e.tumourMedian << ", fluid " << e.fluidMedian
+                << ", parenchyma " << e.parenchymaMedian << ", relative " << e.intraopRelative << " (before surgery "
+                << e.preopRelative << ")\n";
+      BS_CHECK(e.decidedBy == "image");
+      BS_CHECK(std::isfinite(e.intraopRelative));
+      BS_CHECK_MSG(result.tumourResected == resection, "decided " << result.tumourResected);
+      // The class of a tumour in place is kept; a resected one's is dropped.
+      BS_CHECK(result.prototypesPerClass.count(4) == (resection ? 0u : 1u));
+      // The user's word wins, both ways.
+      for (TumourResection told : {TumourResection::Resected, TumourResection::InPlace}) {
+        parameters.tumourResection = told;
+        const TissueClassificationResult overridden =
+          classifyTissues(*c.simulated.intraopImage, *c.simulated.preopLabels, *c.rigid, std::nullopt, parameters);
+        BS_CHECK(overridden.tumourResected == (told == TumourResection::Resected));
+        BS_CHECK(overridden.tumourEvidence.decidedBy == "user");
+      }
+    }
+  });
+}
