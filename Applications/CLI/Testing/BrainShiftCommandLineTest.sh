@@ -606,24 +606,25 @@ DemoEndToEnd)
   ;;
 
 HardScenario)
-  # A hard scenario end to end (small): a 20 mm sink under a left frontal craniotomy, fluid under air
-  # in the gap, a low-field scanner, a hypointense tumour left in place. Measured: TRE 1.05 mm mean
-  # against 4.01 for the rigid registration; p95 2.4 against 11.3.
+  # A hard scenario end to end (small): a 15 mm sink under a right frontal craniotomy, fluid under
+  # air in the gap and the cavity, a bright cavity rim, 5 % noise, 30 % bias. Measured: TRE 0.94 mm
+  # mean against 2.51 for the rigid registration, p95 2.29 against 8.15, craniotomy 1.40 against
+  # 6.56, near the cavity 1.34 against 6.41.
   hard=$work/hard-scenario
   rm -rf "$hard"
-  "$brainshift" demo --size small --scenario lf20-intact-hypointense --output-dir "$hard" > "$work/hard-scenario.log" 2>&1 \
-    || fail "demo --scenario lf20-intact-hypointense failed: $(tail -n 3 "$work/hard-scenario.log")"
+  "$brainshift" demo --size small --scenario rf15-cavityrim --output-dir "$hard" > "$work/hard-scenario.log" 2>&1 \
+    || fail "demo --scenario rf15-cavityrim failed: $(tail -n 3 "$work/hard-scenario.log")"
   e=$hard/evaluation.json
   rigid_mean=$(json_value "$e" "['transforms']['brainshift_rigid']['mean_mm']")
   rigid_p95=$(json_value "$e" "['transforms']['brainshift_rigid']['p95_mm']")
   rigid_craniotomy=$(json_value "$e" "['transforms']['brainshift_rigid']['groups']['craniotomy']['mean_mm']")
-  float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 0.4 * $rigid_mean"
-  float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 1.6"
+  rigid_cavity=$(json_value "$e" "['transforms']['brainshift_rigid']['groups']['near-cavity']['mean_mm']")
+  float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 0.5 * $rigid_mean"
+  float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 1.2"
   float_check "$e" "['transforms']['brainshift']['p95_mm']" "< 0.4 * $rigid_p95"
-  float_check "$e" "['transforms']['brainshift']['groups']['craniotomy']['mean_mm']" "< 0.4 * $rigid_craniotomy"
-  float_check "$e" "['transforms']['brainshift']['groups']['tumour-margin']['mean_mm']" "< 2.0"
-  [ "$(json_value "$hard/report.json" "['stages']['classify']['tumour_resected']")" = "False" ] \
-    || fail "the tumour left in place was declared resected"
+  float_check "$e" "['transforms']['brainshift']['groups']['craniotomy']['mean_mm']" "< 0.3 * $rigid_craniotomy"
+  float_check "$e" "['transforms']['brainshift']['groups']['near-cavity']['mean_mm']" "< 0.3 * $rigid_cavity"
+  [ "$(json_value "$hard/report.json" "['trust']['nonrigid']")" = "trusted" ] || fail "the hard scenario's update was not trusted"
   float_check "$hard/report.json" "['stages']['surface']['directional_nodes']" "> 100"
   # The refine stage (off by default: it made the scenarios worse, README) runs when asked and
   # reports each pass.
