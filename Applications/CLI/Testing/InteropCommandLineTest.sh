@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Command-line tests of `brainshift send` and `brainshift export-dicom` against independent readers:
+# Command-line tests of `brainshift send`, `export-dicom`, `watch --igtl-server` and `register
+# --export-dicom` against independent readers and clients:
 # a server built on libOpenIGTLink (brainshift-interop-test-tool), dciodvfy (dicom3tools), ITK's
 # GDCM reader and DCMTK's dcmdump. Usage: InteropCommandLineTest.sh CASE BRAINSHIFT TOOL WORKDIR;
 # the demo's small case is in WORKDIR/demo (fixture CommandLine.DemoSmallCase).
@@ -140,6 +141,71 @@ WatchExportDicom)
   "$tool" compare-dicom "$here/dicom/scan-01/warped_preop_labels" "$here/session/scan-01/warped_preop_labels.nii.gz" >/dev/null ||
     fail "scan 1's labels read back differ"
   grep -q '"dicom"' "$here/session/watch.json" || fail "watch.json does not record the DICOM export"
+  ;;
+WatchIgtlServer)
+  # watch --igtl-server: the test tool's clients (libOpenIGTLink) receive scan 1's update, one drops
+  # out inside it, one connects later and gets it on connecting, then IMAGE intraop becomes scan 2.
+  case_dir=$demo/case
+  port=$(free_port)
+  timeout 300 "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --output-dir "$here/session" --scans "$case_dir/intraop_image.nii.gz" --igtl-server "127.0.0.1:$port" --max-scans 2 \
+    >"$here/watch.out" 2>"$here/watch.err" &
+  watch_pid=$!
+  timeout 240 "$tool" igtl-watch-client "$port" "$here/session" "$case_dir/intraop_image.nii.gz" >"$here/client.out" 2>&1 ||
+    { fail "the client's checks failed: $(grep FAILED "$here/client.out")"; kill "$watch_pid" 2>/dev/null; }
+  wait "$watch_pid" || fail "watch exited $?: $(tail -3 "$here/watch.err")"
+  cat "$here/client.out"
+  [ "$(grep -c '^ok' "$here/client.out")" -ge 80 ] || fail "fewer checks than four updates' worth passed"
+  [ -f "$here/session/scan-02/report.json" ] || fail "the scan sent as IMAGE intraop was not registered as scan-02"
+  grep -q "OpenIGTLink client 127.0.0.1:[0-9]* dropped" "$here/watch.err" || fail "the dropped client is not reported on stderr"
+  python3 - "$here/session" <<'PY' || fail "watch.json: see above"
+import json, os, sys
+session = sys.argv[1]
+w = json.load(open(os.path.join(session, "watch.json")))
+scans = w["scans"]
+problems = []
+if [s["outcome"] for s in scans] != ["registered", "registered"]: problems.append("outcomes %s" % [s["outcome"] for s in scans])
+if not scans[1]["source"].startswith("OpenIGTLink client 127.0.0.1:"): problems.append("scan 2's source " + scans[1]["source"])
+received = os.path.join(os.path.abspath(session), "received", "intraop-001.nii.gz")
+if scans[1]["intraop_image"] != received or not os.path.isfile(received): problems.append("scan 2's image " + scans[1]["intraop_image"])
+if len({s.get("igtl") for s in scans}) != 1 or not str(scans[0].get("igtl")).startswith("pushed "): problems.append("igtl %s" % [s.get("igtl") for s in scans])
+events = [e["event"] for e in w["igtl_server"]["events"]]
+if events.count("connected") != 3 or events.count("dropped") < 1 or events.count("received scan") != 1:
+    problems.append("events %s" % events)
+for p in problems: print("FAILED: watch.json: " + p, file=sys.stderr)
+sys.exit(1 if problems else 0)
+PY
+  ;;
+WatchIgtlBadInput)
+  case_dir=$demo/case
+  watch() { "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --output-dir "$here/session" --scans "$case_dir/intraop_image.nii.gz" "$@"; }
+  expect 2 "1 to 65535" -- watch --igtl-server 70000
+  expect 2 "1 to 65535" -- watch --igtl-server 127.0.0.1:port
+  expect 2 "not an IPv4 address" -- watch --igtl-server 999.1.1.1:18944
+  start_tool igtl-refuse # a port taken by another server
+  expect 2 "cannot listen" -- watch --igtl-server "127.0.0.1:$port"
+  kill "$tool_pid" 2>/dev/null
+  wait "$tool_pid" 2>/dev/null
+  [ ! -e "$here/session/scan-01" ] || fail "a refused session registered a scan"
+  ;;
+RegisterExportDicom)
+  # register --export-dicom: the update's series written after it, as export-dicom writes them.
+  case_dir=$demo/case
+  register() { "$brainshift" register --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
+    --intraop-image "$case_dir/intraop_image.nii.gz" "$@"; }
+  register --output-dir "$here/update" --export-dicom "$here/dicom" >"$here/register.out" 2>&1 ||
+    fail "register --export-dicom exited $?: $(tail -3 "$here/register.out")"
+  for series in warped_preop_image warped_preop_labels displacement_magnitude_mm; do
+    [ "$(ls "$here/dicom/$series" 2>/dev/null | wc -l)" -eq 30 ] || fail "no series $series of 30 files"
+  done
+  "$tool" compare-dicom "$here/dicom/warped_preop_labels" "$here/update/warped_preop_labels.nii.gz" | grep -q "worst 0.000000)" ||
+    fail "the labels read back differ"
+  "$tool" compare-dicom "$here/dicom/warped_preop_image" "$here/update/warped_preop_image.nii.gz" >/dev/null ||
+    fail "the warped image read back differs"
+  touch "$here/a-file"
+  expect 2 "not a folder" -- register --output-dir "$here/update2" --export-dicom "$here/a-file"
+  [ ! -e "$here/update2/report.json" ] || fail "register ran although --export-dicom is a file"
   ;;
 *)
   echo "unknown case $case_name" >&2
