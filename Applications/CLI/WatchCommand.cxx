@@ -46,10 +46,14 @@ struct WatchOptions {
 /// "[ADDRESS:]PORT" of --igtl-server; every address of this machine when none is given.
 IgtlEndpoint parseServerAddress(const std::string& text)
 {
-  if (text.find(':') != std::string::npos) return parseIgtlEndpoint(text);
-  IgtlEndpoint endpoint = parseIgtlEndpoint("0.0.0.0:" + text);
-  endpoint.host.clear();
-  return endpoint;
+  const bool withAddress = text.find(':') != std::string::npos;
+  try {
+    IgtlEndpoint endpoint = parseIgtlEndpoint(withAddress ? text : "0.0.0.0:" + text);
+    if (!withAddress) endpoint.host.clear();
+    return endpoint;
+  } catch (const InputError&) {
+    throw InputError("--igtl-server " + text + ": expected [ADDRESS:]PORT with a port from 1 to 65535, e.g. 18944 or 127.0.0.1:18944");
+  }
 }
 
 /// The OpenIGTLink server of a session, its events for watch.json.
@@ -260,7 +264,7 @@ void runWatch(const WatchOptions& o)
 {
   if (!o.scans.empty() && !o.watchFolder.empty()) throw InputError("watch: give either --scans or --watch-dir, not both");
   if (o.scans.empty() && o.watchFolder.empty() && o.igtlServer.empty()) {
-    throw InputError("watch: give --scans, --watch-dir or --igtl-server (scans sent as IMAGE intraop)");
+    throw InputError("watch: give either --scans or --watch-dir, or --igtl-server alone (scans sent as IMAGE intraop)");
   }
   if (!(o.pollSeconds > 0 && o.pollSeconds <= 60)) throw InputError("--poll-seconds must be within 0 and 60");
   if (!o.igtlServer.empty()) parseServerAddress(o.igtlServer); // bad input before any work
