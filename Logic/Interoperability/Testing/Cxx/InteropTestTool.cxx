@@ -34,6 +34,7 @@
 #include <iostream>
 #include <map>
 #include <thread>
+#include <chrono>
 #include <cstring>
 
 namespace fs = std::filesystem;
@@ -209,9 +210,15 @@ int igtlWatchClient(int port, const fs::path& session, const fs::path& scanFile)
   std::cout << "-- first client, scan 1\n";
   checkUpdate(testing::receiveUntilStatus(first), session / "scan-01");
   dropping.join();
+  const auto connecting = std::chrono::steady_clock::now();
   auto late = connectToWatch(port);
-  std::cout << "-- client connected after scan 1: the latest update on connecting\n";
-  checkUpdate(testing::receiveUntilStatus(late), session / "scan-01");
+  const std::vector<ReceivedMessage> latest = testing::receiveUntilStatus(late);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - connecting).count();
+  std::size_t bytes = 0;
+  for (const ReceivedMessage& m : latest) bytes += m.values.size() + m.points.size() * 12 + m.attribute.size() * 4;
+  std::cout << "-- client connected after scan 1: the latest update on connecting (" << latest.size() << " messages, "
+            << bytes / 1000 << " kB of values, connect to STATUS " << seconds << " s)\n";
+  checkUpdate(latest, session / "scan-01");
   ScalarImage::Pointer scan = readScalarVolume(scanFile);
   sendScan(first, *scan);
   for (auto* client : {first.GetPointer(), late.GetPointer()}) {
