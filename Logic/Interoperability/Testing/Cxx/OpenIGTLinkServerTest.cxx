@@ -117,6 +117,14 @@ int OpenIGTLinkServerTest(int, char*[])
     dropping->CloseSocket();
     BS_CHECK_MSG(waitFor(server, "dropped"), "the client that hung up is not reported");
 
+    // Other messages are skipped, a scan that cannot be taken is refused; the connection stays.
+    std::vector<PackedIgtlMessage> other;
+    OpenIGTLinkSender(other).sendStatus("scanner", true, "ready");
+    OpenIGTLinkSender(other).sendImage("intraop", *image);
+    other[1].bytes.back() ^= 0x5a; // a damaged value: the CRC check fails
+    for (const PackedIgtlMessage& m : other) BS_CHECK(first->Send(m.bytes.data(), static_cast<int>(m.bytes.size())) == 1);
+    BS_CHECK(waitFor(server, "ignored message") && waitFor(server, "refused message"));
+
     // IMAGE intraop from the client: a scan file with the sent grid and values.
     std::vector<PackedIgtlMessage> scan;
     OpenIGTLinkSender(scan).sendImage("intraop", *image);
