@@ -6,6 +6,9 @@
 // preoperative images, labels and overlays, and the served finite element worker (its partition and
 // assembled matrix; each scan's fixed nodes are eliminated anew). OUT/watch.json lists the scans,
 // their wall time from the image to the warped volumes, and their outcome, rewritten after each.
+// With --igtl-server an OpenIGTLink server (Logic/Interoperability/OpenIGTLinkServer, its own thread)
+// pushes each update to the navigation side and hands over scans sent as IMAGE intraop; the
+// registrations stay on this thread.
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
 #include "Commands.h"
