@@ -248,7 +248,11 @@ void save(DcmSegmentation& seg, const std::vector<Uint8>& allFrames, const fs::p
 {
   DcmFileFormat out;
   DcmDataset& data = *out.getDataset();
+  // DCMTK checks the dimensions while it writes, before the per-frame groups are in the dataset
+  // (a warning on stderr, no check); check them on the whole dataset instead.
+  seg.setCheckDimensionsOnWrite(OFFalse);
   check(seg.writeDataset(data), file, "write the Segmentation");
+  check(seg.getDimensions().checkDimensions(&data), file, "find the frames' dimension index values consistent");
   const std::vector<Uint8> packed = packBits(allFrames);
   check(data.putAndInsertUint8Array(DCM_PixelData, packed.data(), static_cast<unsigned long>(packed.size())), file,
         "set the Pixel Data");

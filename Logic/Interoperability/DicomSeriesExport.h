@@ -74,8 +74,9 @@ struct DicomExportResult {
 /// displacement_magnitude_mm where the displacement field is present, displacement_uncertainty_mm
 /// where present; warped_preop_labels also as a DICOM Segmentation, warped_preop_labels_seg/SEG0001.dcm,
 /// when DCMTK's dcmseg is available, derived from the warped_preop_image series). The reference is
-/// `referenceSeries`, else the intraoperative scan when it is a DICOM series folder, else none (new UIDs). Everything is written into a hidden staging folder
-/// inside `target` and renamed into place at the end: a failure leaves nothing in `target`.
+/// `referenceSeries`, else the intraoperative scan when it is a DICOM series folder, else none (new UIDs).
+/// Everything is written into a hidden staging folder inside `target` and renamed into place at the
+/// end: a failure leaves nothing in `target`.
 /// InputError (nothing written) when a series folder exists already in `target`, or the reference
 /// does not fit the update.
 DicomExportResult exportUpdateToDicom(const UpdateFolderContents& contents, const std::filesystem::path& target,

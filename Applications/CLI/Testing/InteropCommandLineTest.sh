@@ -92,6 +92,19 @@ ExportDicom)
   "$tool" compare-dicom "$out/warped_preop_labels" "$demo/warped_preop_labels.nii.gz" | grep -q "worst 0.000000)" ||
     fail "labels not exact"
   "$tool" compare-dicom "$out/displacement_magnitude_mm" "$demo/displacement_intraop_to_preop.nrrd" || fail "magnitude differs"
+  # The labels also as a DICOM Segmentation (dciodvfy checked it above with the series), read back
+  # with DCMTK: a segment per label, its frames and voxels the NIfTI label's, the MR series' study.
+  seg=$out/warped_preop_labels_seg/SEG0001.dcm
+  if [ -f "$seg" ]; then
+    "$tool" check-seg "$seg" "$demo/warped_preop_labels.nii.gz" "$out/warped_preop_image" >"$here/seg.out" ||
+      fail "the Segmentation read back differs: $(grep FAILED "$here/seg.out")"
+    [ "$(grep -c '^segment ' "$here/seg.out")" -eq 4 ] || fail "not 4 segments: $(cat "$here/seg.out")"
+    [ "$(tag "$seg" FrameOfReferenceUID)" = "$(tag "$out/warped_preop_labels/IM0001.dcm" FrameOfReferenceUID)" ] ||
+      fail "the Segmentation's Frame of Reference is not the labels series'"
+    grep -q "wrote $seg\|wrote $out/warped_preop_labels_seg" "$here/export.out" || fail "export-dicom does not report the Segmentation"
+  elif "$tool" 2>&1 | grep -q check-seg; then
+    fail "no DICOM Segmentation $seg although DCMTK's dcmseg is there"
+  fi
   [ "$(tag "$out/warped_fmri/IM0001.dcm" StudyInstanceUID)" = "$(tag "$out/warped_preop_image/IM0030.dcm" StudyInstanceUID)" ] ||
     fail "the series do not share one study"
   [ "$(tag "$out/warped_fmri/IM0001.dcm" FrameOfReferenceUID)" = "$(tag "$out/displacement_magnitude_mm/IM0001.dcm" FrameOfReferenceUID)" ] ||
@@ -124,6 +137,10 @@ PY
   "$brainshift" export-dicom --output-dir "$here/update" --to "$here/from-scan" >/dev/null || fail "export-dicom of a DICOM scan exited $?"
   [ "$(tag "$here/from-scan/warped_preop_labels/IM0001.dcm" FrameOfReferenceUID)" = "$(tag "$scan/IM0001.dcm" FrameOfReferenceUID)" ] ||
     fail "the DICOM scan's Frame of Reference is not kept"
+  if [ -f "$here/from-scan/warped_preop_labels_seg/SEG0001.dcm" ]; then
+    [ "$(tag "$here/from-scan/warped_preop_labels_seg/SEG0001.dcm" FrameOfReferenceUID)" = "$(tag "$scan/IM0001.dcm" FrameOfReferenceUID)" ] ||
+      fail "the Segmentation does not keep the DICOM scan's Frame of Reference"
+  fi
   # Another patient's series as reference: one line, exit 2, nothing in the target folder.
   other=$here/other-patient
   cp -r "$scan" "$other"

@@ -8,6 +8,11 @@
 //                                 same physical grid, values within half the series' RescaleSlope.
 //   igtl-watch-client PORT SESSION SCAN
 //                                 a client of `watch --igtl-server 127.0.0.1:PORT` (see igtlWatchClient).
+//   check-seg SEG LABELS SERIES   reads the DICOM Segmentation SEG with DCMTK's reader and checks it
+//                                 against the label volume LABELS and the MR series SERIES it was
+//                                 derived from: a segment per label value present, a frame per slice
+//                                 from the label's first to its last, each segment's voxels the
+//                                 label's, the series' study and Frame of Reference.
 // Exit 0 when every check holds, 1 otherwise, with one line per finding.
 #include "IgtlTestReceiver.h"
 #include "ModelIO.h"
@@ -18,6 +23,9 @@
 
 #include <dcmtk/config/osconfig.h>
 #include <dcmtk/dcmdata/dctk.h>
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+#include "DicomSegmentationReadBack.h"
+#endif
 
 #include <igtlImageMessage.h>
 #include <igtlStatusMessage.h>
@@ -287,6 +295,57 @@ int compareDicom(const fs::path& series, const fs::path& file)
                                    std::to_string(worstValue) + ")");
   return failures ? 1 : 0;
 }
+
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+std::string fileTag(const fs::path& file, const DcmTagKey& tag)
+{
+  DcmFileFormat dicom;
+  OFString value;
+  if (dicom.loadFile(file.c_str()).bad()) return {};
+  dicom.getDataset()->findAndGetOFString(tag, value);
+  return value.c_str();
+}
+
+int checkSegmentation(const fs::path& segFile, const fs::path& labelsFile, const fs::path& series)
+{
+  const testing::ReadBackSegmentation seg = testing::readBackSegmentation(segFile.string());
+  ScalarImage::Pointer labels = readScalarVolume(labelsFile);
+  const ImageGeometry g = ImageGeometry::of(labels.GetPointer());
+  std::map<int, std::size_t> voxels, firstSlice, lastSlice;
+  for (std::size_t i = 0; i < g.numberOfVoxels(); ++i) {
+    const int value = static_cast<int>(labels->GetBufferPointer()[i]);
+    if (value == 0) continue;
+    const std::size_t k = i / (g.size[0] * g.size[1]);
+    if (!voxels.count(value)) firstSlice[value] = k;
+    ++voxels[value];
+    lastSlice[value] = k;
+  }
+  check(seg.modality == "SEG", segFile.string() + ": Modality SEG (" + seg.modality + ")");
+  check(seg.segments.size() == voxels.size(), segFile.string() + ": " + std::to_string(voxels.size()) + " segments (" +
+                                                std::to_string(seg.segments.size()) + ")");
+  std::size_t s = 0;
+  for (const auto& [value, count] : voxels) {
+    if (s >= seg.segments.size()) break;
+    const testing::ReadBackSegment& segment = seg.segments[s++];
+    const std::size_t frames = lastSlice[value] - firstSlice[value] + 1;
+    check(segment.frames == frames, segFile.string() + ": segment '" + segment.label + "' has " + std::to_string(frames) +
+                                      " frames (" + std::to_string(segment.frames) + ")");
+    check(segment.voxels == count, segFile.string() + ": segment '" + segment.label + "' has label " + std::to_string(value) +
+                                     "'s " + std::to_string(count) + " voxels (" + std::to_string(segment.voxels) + ")");
+    std::cout << "segment " << s << " '" << segment.label << "': " << segment.frames << " frames, " << segment.voxels << " voxels\n";
+  }
+  check(seg.studyUid == fileTag(series / "IM0001.dcm", DCM_StudyInstanceUID), segFile.string() + ": the series' StudyInstanceUID");
+  check(seg.frameOfReferenceUid == fileTag(series / "IM0001.dcm", DCM_FrameOfReferenceUID),
+        segFile.string() + ": the series' FrameOfReferenceUID");
+  if (!seg.segments.empty() && !voxels.empty()) {
+    char slice[32];
+    std::snprintf(slice, sizeof slice, "IM%04zu.dcm", firstSlice[voxels.begin()->first] + 1);
+    check(seg.segments[0].sourceInstances.at(0) == fileTag(series / slice, DCM_SOPInstanceUID),
+          segFile.string() + ": the first frame derived from " + (series / slice).string());
+  }
+  return failures ? 1 : 0;
+}
+#endif
 } // namespace
 
 int main(int argc, char** argv)
@@ -303,11 +362,14 @@ int main(int argc, char** argv)
     }
     if (command == "compare-dicom" && argc == 4) return compareDicom(argv[2], argv[3]);
     if (command == "igtl-watch-client" && argc == 5) return igtlWatchClient(std::stoi(argv[2]), argv[3], argv[4]);
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+    if (command == "check-seg" && argc == 5) return checkSegmentation(argv[2], argv[3], argv[4]);
+#endif
   } catch (const std::exception& e) {
     std::cout << "FAILED  " << e.what() << '\n';
     return 1;
   }
   std::cerr << "usage: brainshift-interop-test-tool igtl-server PORTFILE OUTDIR | igtl-refuse PORTFILE | "
-               "compare-dicom SERIES FILE | igtl-watch-client PORT SESSION SCAN\n";
+               "compare-dicom SERIES FILE | igtl-watch-client PORT SESSION SCAN | check-seg SEG LABELS SERIES\n";
   return 2;
 }
