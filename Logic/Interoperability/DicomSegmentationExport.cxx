@@ -82,7 +82,7 @@ std::string sliceFileName(std::size_t k)
 }
 
 /// Per label value, the first and last slice it occupies (first > last: absent).
-std::vector<std::pair<std::size_t, std::size_t>> sliceRanges(const ScalarImage& labels, const fs::path& file)
+std::vector<std::pair<std::size_t, std::size_t>> sliceRanges(const ScalarImage& labels, const std::string& source)
 {
   const ImageGeometry g = ImageGeometry::of(&labels);
   std::vector<std::pair<std::size_t, std::size_t>> ranges(5, {g.size[2], 0});
@@ -92,7 +92,7 @@ std::vector<std::pair<std::size_t, std::size_t>> sliceRanges(const ScalarImage& 
     const float value = v[i];
     if (value == 0) continue;
     if (value != std::round(value) || value < 1 || value > 4) {
-      throw InputError(file.string() + ": label value " + std::to_string(value) +
+      throw InputError(source + ": label value " + std::to_string(value) +
                        " is none of BrainShift's (1 head, 2 parenchyma, 3 ventricles, 4 tumour)");
     }
     auto& range = ranges[static_cast<std::size_t>(value)];
@@ -273,7 +273,8 @@ std::vector<DicomSegmentInfo> writeDicomSegmentation(const ScalarImage& labels, 
                                                      const DicomSegmentationDescription& description, const fs::path& file)
 {
   const ImageGeometry g = ImageGeometry::of(&labels);
-  const auto ranges = sliceRanges(labels, file);
+  const auto ranges =
+    sliceRanges(labels, description.labelsSource.empty() ? file.string() : description.labelsSource);
   const auto slices = sourceSlices(sourceSeriesFolder, g, file);
   DcmSegmentation* created = nullptr;
   check(DcmSegmentation::createBinarySegmentation(

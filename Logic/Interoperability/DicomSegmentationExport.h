@@ -22,6 +22,7 @@ bool dicomSegmentationAvailable();
 struct DicomSegmentationDescription {
   std::string description = "BrainShift warped_preop_labels"; ///< SeriesDescription
   int seriesNumber = 1;
+  std::string labelsSource; ///< where the labels came from, named by a label value error (default: the file)
 };
 
 /// The segments written: the label value and the number of frames of each.
@@ -33,7 +34,8 @@ struct DicomSegmentInfo {
 
 /// Writes `labels` (values 0..4, on the grid of the MR series in `sourceSeriesFolder`, whose files
 /// IM0001.dcm... are its slices in order) as a binary Segmentation into `file`. InputError naming
-/// the file when a value is not a label BrainShift knows or the source series does not fit the grid;
+/// the labels' source when a value is not a label BrainShift knows, or the file when the labels hold
+/// none or the source series does not fit the grid;
 /// std::runtime_error naming the file when DCMTK refuses the object.
 std::vector<DicomSegmentInfo> writeDicomSegmentation(const ScalarImage& labels,
                                                      const std::filesystem::path& sourceSeriesFolder,

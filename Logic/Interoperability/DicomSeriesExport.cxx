@@ -293,6 +293,7 @@ ScalarImage::Pointer displacementMagnitude(const fs::path& fieldPath)
 
 struct SeriesToWrite {
   std::string folder;
+  fs::path source; ///< the file the values come from
   DicomSeriesDescription description;
   std::function<ScalarImage::Pointer()> load;
 };
@@ -303,7 +304,7 @@ std::vector<SeriesToWrite> seriesOf(const UpdateFolderContents& contents)
   int number = 9001; // away from the scanner's own series numbers in a shared study
   for (const UpdateVolume& volume : contents.warpedVolumes) {
     const fs::path path = volume.path;
-    list.push_back({volume.name,
+    list.push_back({volume.name, path,
                     {"BrainShift " + volume.name, number++,
                      "preoperative volume warped onto the intraoperative scan by BrainShift's biomechanical update" +
                        std::string(volume.isLabelMap ? " (labels, nearest neighbour)" : "")},
@@ -311,14 +312,14 @@ std::vector<SeriesToWrite> seriesOf(const UpdateFolderContents& contents)
   }
   if (contents.displacementField) {
     const fs::path path = *contents.displacementField;
-    list.push_back({"displacement_magnitude_mm",
+    list.push_back({"displacement_magnitude_mm", path,
                     {"BrainShift displacement magnitude (mm)", number++,
                      "length of the brain shift displacement at each intraoperative voxel, mm"},
                     [path] { return displacementMagnitude(path); }});
   }
   if (contents.uncertainty) {
     const fs::path path = *contents.uncertainty;
-    list.push_back({"displacement_uncertainty_mm",
+    list.push_back({"displacement_uncertainty_mm", path,
                     {"BrainShift displacement uncertainty (mm)", number++,
                      "expected error of the brain shift displacement at each intraoperative voxel, mm"},
                     [path] { return readScalarVolume(path); }});
@@ -372,13 +373,17 @@ DicomExportResult exportUpdateToDicom(const UpdateFolderContents& contents, cons
   StagingFolder staging{target / (".brainshift-export-" + std::to_string(::getpid()))};
   fs::remove_all(staging.path, ec);
   ScalarImage::Pointer labels;
+  fs::path labelsPath;
   std::optional<ImageGeometry> warpedImageGrid;
   for (const SeriesToWrite& s : series) {
     ScalarImage::Pointer image = s.load();
     writeDicomSeries(*image, result.study, s.description, staging.path / s.folder);
     result.files += static_cast<int>(image->GetLargestPossibleRegion().GetSize()[2]);
     result.seriesFolders.push_back(s.folder);
-    if (s.folder == kLabelsVolume) labels = image;
+    if (s.folder == kLabelsVolume) {
+      labels = image;
+      labelsPath = s.source;
+    }
     if (s.folder == kWarpedImageVolume) warpedImageGrid = ImageGeometry::of(image.GetPointer());
   }
   if (labels && dicomSegmentationAvailable()) {
@@ -386,7 +391,8 @@ DicomExportResult exportUpdateToDicom(const UpdateFolderContents& contents, cons
     const bool onImageGrid = warpedImageGrid && warpedImageGrid->sameGridAs(ImageGeometry::of(labels.GetPointer()));
     fs::create_directories(staging.path / kSegmentationFolder);
     writeDicomSegmentation(*labels, staging.path / (onImageGrid ? kWarpedImageVolume : kLabelsVolume),
-                           {"BrainShift " + std::string(kLabelsVolume) + " (segmentation)", 9001 + static_cast<int>(series.size())},
+                           {"BrainShift " + std::string(kLabelsVolume) + " (segmentation)", 9001 + static_cast<int>(series.size()),
+                            labelsPath.string()},
                            staging.path / kSegmentationFolder / kSegmentationFile);
     result.files += 1;
     result.seriesFolders.push_back(kSegmentationFolder);

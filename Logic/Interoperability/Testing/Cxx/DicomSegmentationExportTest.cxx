@@ -8,6 +8,8 @@
 #include "DicomSegmentationReadBack.h"
 #include "DicomSeriesExport.h"
 #include "SyntheticData.h"
+#include "UpdateFolder.h"
+#include "VolumeIO.h"
 
 namespace {
 /// Labels on `g` (at least 5 columns, 4 rows, 5 slices): head everywhere but the first voxel of each
@@ -63,7 +65,7 @@ int DicomSegmentationExportTest(int, char*[])
     auto image = imageOn<ScalarImage>(g, [](const PhysicalPoint& p) { return static_cast<float>(p[0] * 3 + p[2]); });
     writeDicomSeries(*image, study, {"BrainShift warped_preop_image", 9001, "test"}, folder / "image");
     const std::filesystem::path file = folder / "seg.dcm";
-    const std::vector<DicomSegmentInfo> written = writeDicomSegmentation(*labels, folder / "image", {"BrainShift labels", 9005}, file);
+    const std::vector<DicomSegmentInfo> written = writeDicomSegmentation(*labels, folder / "image", {"BrainShift labels", 9005, ""}, file);
     BS_CHECK(written.size() == 4 && written[2].label == "ventricles" && written[2].frames == 2 && written[3].frames == 1);
 
     const ReadBackSegmentation seg = readBackSegmentation(file.string());
@@ -106,8 +108,30 @@ int DicomSegmentationExportTest(int, char*[])
     const std::vector<std::size_t> expected{25, 25, 25, 25, 25, 25, 9, 9, 8, 8, 7, 9, 1, 1, 2};
     BS_CHECK_MSG(perFrame == expected, "frame 2 has " << (perFrame.size() > 2 ? perFrame[2] : 0) << " set pixels");
 
+    // The whole export: the Segmentation beside the MR series, derived from the warped image's.
+    writeScalarVolume(image, folder / "warped_preop_image.nii.gz");
+    writeScalarVolume(labels, folder / "warped_preop_labels.nii.gz");
+    UpdateFolderContents contents;
+    contents.folder = folder;
+    contents.intraopImage = folder / "warped_preop_image.nii.gz";
+    contents.warpedVolumes = {{"warped_preop_image", folder / "warped_preop_image.nii.gz", false},
+                              {"warped_preop_labels", folder / "warped_preop_labels.nii.gz", true}};
+    const DicomExportResult exported = exportUpdateToDicom(contents, folder / "export", std::nullopt);
+    BS_CHECK(exported.seriesFolders.size() == 3 && exported.seriesFolders[2] == "warped_preop_labels_seg");
+    const ReadBackSegmentation again = readBackSegmentation((folder / "export/warped_preop_labels_seg/SEG0001.dcm").string());
+    BS_CHECK(again.segments.size() == 4 && again.frameOfReferenceUid == exported.study.frameOfReferenceUid);
+    DcmFileFormat first;
+    BS_CHECK(first.loadFile((folder / "export/warped_preop_image/IM0001.dcm").c_str()).good());
+    first.getDataset()->findAndGetOFString(DCM_SOPInstanceUID, instance);
+    BS_CHECK(again.segments[0].sourceInstances.at(0) == instance.c_str());
+
+    // A value that is no BrainShift label: refused naming the labels' file, nothing exported.
     labels->GetBufferPointer()[3] = 7;
     BS_CHECK_THROWS(writeDicomSegmentation(*labels, folder / "image", {}, folder / "bad.dcm"), InputError, "label value 7");
     BS_CHECK(!std::filesystem::exists(folder / "bad.dcm"));
+    writeScalarVolume(labels, folder / "warped_preop_labels.nii.gz");
+    BS_CHECK_THROWS(exportUpdateToDicom(contents, folder / "refused", std::nullopt), InputError,
+                    (folder / "warped_preop_labels.nii.gz").string() + ": label value 7");
+    BS_CHECK(std::filesystem::is_empty(folder / "refused"));
   });
 }
