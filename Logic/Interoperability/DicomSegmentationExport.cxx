@@ -40,7 +40,7 @@ std::vector<DicomSegmentInfo> writeDicomSegmentation(const ScalarImage&, const f
 bool dicomSegmentationAvailable() { return true; }
 
 namespace {
-/// A coded concept: SNOMED CT code value, scheme and the meaning DICOM PS3.16 gives it.
+/// A SNOMED CT concept (scheme SCT): its code value and the meaning DICOM PS3.16 gives it.
 struct Code {
   const char* value;
   const char* meaning;
