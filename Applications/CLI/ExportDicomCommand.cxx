@@ -1,5 +1,5 @@
-// `brainshift export-dicom`: an update's volumes as DICOM MR series for a navigation workstation.
-// The work is in Logic/Interoperability.
+// `brainshift export-dicom`: an update's volumes as DICOM MR series for a navigation workstation,
+// and the warped labels also as a DICOM Segmentation. The work is in Logic/Interoperability.
 #include "BrainShiftErrors.h"
 #include "Commands.h"
 #include "DicomSeriesExport.h"
@@ -19,8 +19,8 @@ void addExportDicomCommand(CLI::App& app)
   };
   auto options = std::make_shared<Options>();
   CLI::App* command = app.add_subcommand(
-    "export-dicom", "Write the warped volumes (and displacement magnitude, uncertainty) as DICOM MR series sharing the "
-                    "intraoperative study and Frame of Reference");
+    "export-dicom", "Write the warped volumes (and displacement magnitude, uncertainty) as DICOM MR series, and the "
+                    "warped labels also as a DICOM Segmentation, sharing the intraoperative study and Frame of Reference");
   command->add_option("--output-dir", options->outputDir, "the output folder of `brainshift register` (or `demo`)")
     ->required();
   command->add_option("--to", options->to, "the folder to write the series into (one subfolder per series)")->required();
@@ -33,7 +33,10 @@ void addExportDicomCommand(CLI::App& app)
     std::optional<fs::path> reference;
     if (!options->referenceSeries.empty()) reference = options->referenceSeries;
     const DicomExportResult result = exportUpdateToDicom(contents, options->to, reference);
-    for (const std::string& series : result.seriesFolders) std::printf("wrote %s\n", (options->to / series).c_str());
+    for (const std::string& series : result.seriesFolders) {
+      const bool segmentation = fs::exists(options->to / series / "SEG0001.dcm");
+      std::printf("wrote %s%s\n", (options->to / series).c_str(), segmentation ? " (DICOM Segmentation, SEG0001.dcm)" : "");
+    }
     std::printf("%zu series, %d files; study %s, Frame of Reference %s (%s)\n", result.seriesFolders.size(), result.files,
                 result.study.studyInstanceUid.c_str(), result.study.frameOfReferenceUid.c_str(),
                 result.fromReference ? ("from " + result.referenceSeries.string()).c_str() : "new");

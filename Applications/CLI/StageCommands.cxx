@@ -1,8 +1,11 @@
 #include "BrainShiftErrors.h"
+#include "DicomSeriesExport.h"
 #include "OutputFolder.h"
 #include "RunCommands.h"
+#include "UpdateFolder.h"
 #include "VolumeIO.h"
 
+#include <cstdio>
 #include <memory>
 
 namespace brainshift::cli {
@@ -68,12 +71,24 @@ void addRegisterCommand(CLI::App& app)
                       "the output folder of an earlier scan of the same case: its rigid transform starts the registration, "
                       "its classification prototypes, mesh and preoperative surface fit are reused");
   command->add_flag("--overwrite", options->overwrite, "replace another case's results in --output-dir");
-  command->callback([options] {
+  auto exportDicom = std::make_shared<fs::path>();
+  command->add_option("--export-dicom", *exportDicom,
+                      "after the update, its series as `export-dicom --to DIR` writes them (the scan's study and Frame "
+                      "of Reference when it was a DICOM series)");
+  command->callback([options, exportDicom] {
     const Configuration configuration = configurationFor(*options);
+    std::error_code ec;
+    if (!exportDicom->empty() && fs::exists(*exportDicom, ec) && !fs::is_directory(*exportDicom, ec)) {
+      throw InputError(exportDicom->string() + ": --export-dicom is not a folder");
+    }
     claimFolderOf(*options);
     RunReport report(options->outputDir / "report.json");
     RunContext context(*options, configuration, report);
     runRegistration(context);
+    if (exportDicom->empty()) return;
+    const DicomExportResult result = exportUpdateToDicom(inspectUpdateFolder(options->outputDir), *exportDicom, std::nullopt);
+    std::printf("== DICOM: %zu series, %d files in %s\n", result.seriesFolders.size(), result.files,
+                exportDicom->string().c_str());
   });
 }
 

@@ -1,6 +1,7 @@
 #include "DicomSeriesExport.h"
 
 #include "BrainShiftErrors.h"
+#include "DicomSegmentationExport.h"
 #include "UpdateFolder.h"
 #include "VolumeIO.h"
 
@@ -20,10 +21,7 @@
 namespace brainshift {
 namespace fs = std::filesystem;
 
-namespace {
-/// A DICOM decimal string (VR DS, at most 16 characters) that parses back as close to `value` as
-/// 16 characters allow.
-std::string decimalString(double value)
+std::string dicomDecimalString(double value)
 {
   if (std::abs(value) < 1e-12) value = 0;
   char text[64];
@@ -34,6 +32,8 @@ std::string decimalString(double value)
   std::snprintf(text, sizeof text, "%.1g", value);
   return text;
 }
+
+namespace {
 
 std::string dateTime(const char* format)
 {
@@ -82,8 +82,8 @@ DicomRescale rescaleFor(const ScalarImage& image)
     return rescale;
   }
   // Parse the decimal strings back: the file's values are what a reader will apply.
-  rescale.slope = std::stod(decimalString(high > low ? (static_cast<double>(high) - low) / 65535.0 : 1.0));
-  rescale.intercept = std::stod(decimalString(low));
+  rescale.slope = std::stod(dicomDecimalString(high > low ? (static_cast<double>(high) - low) / 65535.0 : 1.0));
+  rescale.intercept = std::stod(dicomDecimalString(low));
   return rescale;
 }
 
@@ -131,13 +131,13 @@ void putSeries(DcmDataset& data, const DicomSeriesDescription& series, const std
   put(data, DCM_RepetitionTime, "");
   put(data, DCM_EchoTime, "");
   put(data, DCM_EchoTrainLength, "");
-  put(data, DCM_PixelSpacing, decimalString(geometry.spacing[1]) + "\\" + decimalString(geometry.spacing[0]));
+  put(data, DCM_PixelSpacing, dicomDecimalString(geometry.spacing[1]) + "\\" + dicomDecimalString(geometry.spacing[0]));
   std::string orientation;
   for (int axis = 0; axis < 2; ++axis)
-    for (int r = 0; r < 3; ++r) orientation += (orientation.empty() ? "" : "\\") + decimalString(geometry.direction[r][axis]);
+    for (int r = 0; r < 3; ++r) orientation += (orientation.empty() ? "" : "\\") + dicomDecimalString(geometry.direction[r][axis]);
   put(data, DCM_ImageOrientationPatient, orientation);
-  put(data, DCM_SliceThickness, decimalString(geometry.spacing[2]));
-  put(data, DCM_SpacingBetweenSlices, decimalString(geometry.spacing[2]));
+  put(data, DCM_SliceThickness, dicomDecimalString(geometry.spacing[2]));
+  put(data, DCM_SpacingBetweenSlices, dicomDecimalString(geometry.spacing[2]));
   put(data, DCM_SamplesPerPixel, "1");
   put(data, DCM_PhotometricInterpretation, "MONOCHROME2");
   put(data, DCM_Rows, std::to_string(geometry.size[1]));
@@ -146,15 +146,15 @@ void putSeries(DcmDataset& data, const DicomSeriesDescription& series, const std
   put(data, DCM_BitsStored, "16");
   put(data, DCM_HighBit, "15");
   put(data, DCM_PixelRepresentation, "0");
-  put(data, DCM_RescaleIntercept, decimalString(rescale.intercept));
-  put(data, DCM_RescaleSlope, decimalString(rescale.slope));
+  put(data, DCM_RescaleIntercept, dicomDecimalString(rescale.intercept));
+  put(data, DCM_RescaleSlope, dicomDecimalString(rescale.slope));
 }
 
 /// A display window over the whole range of the values (VOI LUT module).
 void putWindow(DcmDataset& data, const std::pair<double, double>& range)
 {
-  put(data, DCM_WindowCenter, decimalString((range.first + range.second) / 2));
-  put(data, DCM_WindowWidth, decimalString(std::max(1.0, range.second - range.first)));
+  put(data, DCM_WindowCenter, dicomDecimalString((range.first + range.second) / 2));
+  put(data, DCM_WindowWidth, dicomDecimalString(std::max(1.0, range.second - range.first)));
 }
 } // namespace
 
@@ -237,7 +237,7 @@ DicomRescale writeDicomSeries(const ScalarImage& image, const DicomStudyContext&
     std::string position;
     for (int r = 0; r < 3; ++r) {
       const double p = geometry.origin[r] + geometry.direction[r][2] * geometry.spacing[2] * static_cast<double>(k);
-      position += (r ? "\\" : "") + decimalString(p);
+      position += (r ? "\\" : "") + dicomDecimalString(p);
     }
     put(data, DCM_ImagePositionPatient, position);
     const float* slice = values + k * columns * rows;
@@ -293,6 +293,7 @@ ScalarImage::Pointer displacementMagnitude(const fs::path& fieldPath)
 
 struct SeriesToWrite {
   std::string folder;
+  fs::path source; ///< the file the values come from
   DicomSeriesDescription description;
   std::function<ScalarImage::Pointer()> load;
 };
@@ -303,7 +304,7 @@ std::vector<SeriesToWrite> seriesOf(const UpdateFolderContents& contents)
   int number = 9001; // away from the scanner's own series numbers in a shared study
   for (const UpdateVolume& volume : contents.warpedVolumes) {
     const fs::path path = volume.path;
-    list.push_back({volume.name,
+    list.push_back({volume.name, path,
                     {"BrainShift " + volume.name, number++,
                      "preoperative volume warped onto the intraoperative scan by BrainShift's biomechanical update" +
                        std::string(volume.isLabelMap ? " (labels, nearest neighbour)" : "")},
@@ -311,20 +312,25 @@ std::vector<SeriesToWrite> seriesOf(const UpdateFolderContents& contents)
   }
   if (contents.displacementField) {
     const fs::path path = *contents.displacementField;
-    list.push_back({"displacement_magnitude_mm",
+    list.push_back({"displacement_magnitude_mm", path,
                     {"BrainShift displacement magnitude (mm)", number++,
                      "length of the brain shift displacement at each intraoperative voxel, mm"},
                     [path] { return displacementMagnitude(path); }});
   }
   if (contents.uncertainty) {
     const fs::path path = *contents.uncertainty;
-    list.push_back({"displacement_uncertainty_mm",
+    list.push_back({"displacement_uncertainty_mm", path,
                     {"BrainShift displacement uncertainty (mm)", number++,
                      "expected error of the brain shift displacement at each intraoperative voxel, mm"},
                     [path] { return readScalarVolume(path); }});
   }
   return list;
 }
+
+constexpr const char* kLabelsVolume = "warped_preop_labels";
+constexpr const char* kWarpedImageVolume = "warped_preop_image";
+constexpr const char* kSegmentationFolder = "warped_preop_labels_seg";
+constexpr const char* kSegmentationFile = "SEG0001.dcm";
 
 /// Removes the staging folder unless it was emptied into place.
 struct StagingFolder {
@@ -354,24 +360,44 @@ DicomExportResult exportUpdateToDicom(const UpdateFolderContents& contents, cons
   }
   result.fromReference = !result.referenceSeries.empty();
   const std::vector<SeriesToWrite> series = seriesOf(contents);
-  for (const SeriesToWrite& s : series) {
-    if (fs::exists(target / s.folder, ec)) {
-      throw InputError((target / s.folder).string() + ": exists already; export into a new folder");
+  std::vector<std::string> folders;
+  for (const SeriesToWrite& s : series) folders.push_back(s.folder);
+  if (dicomSegmentationAvailable()) folders.push_back(kSegmentationFolder);
+  for (const std::string& folder : folders) {
+    if (fs::exists(target / folder, ec)) {
+      throw InputError((target / folder).string() + ": exists already; export into a new folder");
     }
   }
   if (fs::exists(target, ec) && !fs::is_directory(target, ec)) throw InputError(target.string() + ": not a folder");
   fs::create_directories(target);
   StagingFolder staging{target / (".brainshift-export-" + std::to_string(::getpid()))};
   fs::remove_all(staging.path, ec);
+  ScalarImage::Pointer labels;
+  fs::path labelsPath;
+  std::optional<ImageGeometry> warpedImageGrid;
   for (const SeriesToWrite& s : series) {
     ScalarImage::Pointer image = s.load();
     writeDicomSeries(*image, result.study, s.description, staging.path / s.folder);
     result.files += static_cast<int>(image->GetLargestPossibleRegion().GetSize()[2]);
-  }
-  for (const SeriesToWrite& s : series) {
-    fs::rename(staging.path / s.folder, target / s.folder);
     result.seriesFolders.push_back(s.folder);
+    if (s.folder == kLabelsVolume) {
+      labels = image;
+      labelsPath = s.source;
+    }
+    if (s.folder == kWarpedImageVolume) warpedImageGrid = ImageGeometry::of(image.GetPointer());
   }
+  if (labels && dicomSegmentationAvailable()) {
+    // The labels' own MR series stays for systems that read no Segmentation.
+    const bool onImageGrid = warpedImageGrid && warpedImageGrid->sameGridAs(ImageGeometry::of(labels.GetPointer()));
+    fs::create_directories(staging.path / kSegmentationFolder);
+    writeDicomSegmentation(*labels, staging.path / (onImageGrid ? kWarpedImageVolume : kLabelsVolume),
+                           {"BrainShift " + std::string(kLabelsVolume) + " (segmentation)", 9001 + static_cast<int>(series.size()),
+                            labelsPath.string()},
+                           staging.path / kSegmentationFolder / kSegmentationFile);
+    result.files += 1;
+    result.seriesFolders.push_back(kSegmentationFolder);
+  }
+  for (const std::string& folder : result.seriesFolders) fs::rename(staging.path / folder, target / folder);
   return result;
 }
 

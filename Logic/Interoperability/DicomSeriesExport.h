@@ -17,6 +17,10 @@ namespace brainshift {
 
 struct UpdateFolderContents;
 
+/// A DICOM decimal string (VR DS, at most 16 characters) that parses back as close to `value` as
+/// 16 characters allow.
+std::string dicomDecimalString(double value);
+
 /// The patient, study and Frame of Reference a series goes into.
 struct DicomStudyContext {
   std::string specificCharacterSet; ///< copied from a reference; empty: ASCII
@@ -68,9 +72,11 @@ struct DicomExportResult {
 
 /// Exports the update in `contents` into `target`: a folder per series (warped volumes,
 /// displacement_magnitude_mm where the displacement field is present, displacement_uncertainty_mm
-/// where present). The reference is `referenceSeries`, else the intraoperative scan when it is a
-/// DICOM series folder, else none (new UIDs). Everything is written into a hidden staging folder
-/// inside `target` and renamed into place at the end: a failure leaves nothing in `target`.
+/// where present; warped_preop_labels also as a DICOM Segmentation, warped_preop_labels_seg/SEG0001.dcm,
+/// when DCMTK's dcmseg is available, derived from the warped_preop_image series). The reference is
+/// `referenceSeries`, else the intraoperative scan when it is a DICOM series folder, else none (new UIDs).
+/// Everything is written into a hidden staging folder inside `target` and renamed into place at the
+/// end: a failure leaves nothing in `target`.
 /// InputError (nothing written) when a series folder exists already in `target`, or the reference
 /// does not fit the update.
 DicomExportResult exportUpdateToDicom(const UpdateFolderContents& contents, const std::filesystem::path& target,

@@ -1,5 +1,6 @@
 #include "OpenIGTLinkSender.h"
 
+#include "IgtlConnectedSocket.h"
 #include "ModelIO.h"
 #include "UpdateFolder.h"
 #include "VolumeIO.h"
@@ -106,24 +107,6 @@ Matrix4 igtlTransformMatrix(const SpatialTransform& intraopToPreop)
 }
 
 namespace {
-/// libOpenIGTLink's client socket on a connection made here: ConnectToServer reports a failure only
-/// on stderr and loses errno, and the descriptor is needed to see a server that hung up.
-class ConnectedSocket : public igtl::ClientSocket {
-public:
-  typedef ConnectedSocket Self;
-  typedef igtl::ClientSocket Superclass;
-  typedef igtl::SmartPointer<Self> Pointer;
-  typedef igtl::SmartPointer<const Self> ConstPointer;
-  igtlTypeMacro(ConnectedSocket, igtl::ClientSocket);
-  igtlNewMacro(ConnectedSocket);
-  void adopt(int descriptor) { m_SocketDescriptor = descriptor; }
-  int descriptor() const { return m_SocketDescriptor; }
-
-protected:
-  ConnectedSocket() = default;
-  ~ConnectedSocket() = default;
-};
-
 /// A TCP connection to `endpoint` (TCP_NODELAY, as libOpenIGTLink sets it). ConnectionError with the
 /// system's reason otherwise.
 int connectTo(const IgtlEndpoint& endpoint)
@@ -160,6 +143,8 @@ int connectTo(const IgtlEndpoint& endpoint)
 }
 } // namespace
 
+using detail::ConnectedSocket;
+
 struct OpenIGTLinkSender::Socket {
   ConnectedSocket::Pointer client = ConnectedSocket::New();
 };
@@ -171,6 +156,11 @@ OpenIGTLinkSender::OpenIGTLinkSender(const IgtlEndpoint& endpoint, int sendTimeo
   socket_->client->SetSendTimeout(sendTimeoutMs);
 }
 
+OpenIGTLinkSender::OpenIGTLinkSender(std::vector<PackedIgtlMessage>& recorder)
+  : recorder_(&recorder), endpoint_{"(recorded)", 0}
+{
+}
+
 OpenIGTLinkSender::~OpenIGTLinkSender()
 {
   if (socket_ && socket_->client) socket_->client->CloseSocket();
@@ -178,7 +168,9 @@ OpenIGTLinkSender::~OpenIGTLinkSender()
 
 void OpenIGTLinkSender::transmit(const char* type, const std::string& device, const void* data, std::size_t bytes)
 {
-  if (socket_->client->Send(data, static_cast<int>(bytes)) != 1) {
+  if (recorder_) {
+    recorder_->push_back({type, device, std::string(static_cast<const char*>(data), bytes)});
+  } else if (socket_->client->Send(data, static_cast<int>(bytes)) != 1) {
     throw ConnectionError("OpenIGTLink server " + endpoint_.text() + " closed the connection while receiving " + type +
                           " " + device);
   }
@@ -189,6 +181,7 @@ void OpenIGTLinkSender::transmit(const char* type, const std::string& device, co
 void OpenIGTLinkSender::checkStillConnected()
 {
   // A server's own messages are not read; peeking shows an end of stream or a reset without taking them.
+  if (recorder_) return;
   char byte;
   errno = 0;
   const ssize_t n = recv(socket_->client->descriptor(), &byte, 1, MSG_PEEK | MSG_DONTWAIT);

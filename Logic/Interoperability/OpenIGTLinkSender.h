@@ -15,6 +15,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 class vtkPolyData;
 
@@ -53,10 +54,19 @@ Matrix4 igtlTransformMatrix(const SpatialTransform& intraopToPreop);
 /// OpenIGTLink's device names hold at most 20 characters.
 constexpr std::size_t igtlDeviceNameLength = 20;
 
+/// One packed message (header, body and CRC) as it goes onto the wire.
+struct PackedIgtlMessage {
+  std::string type, device;
+  std::string bytes;
+};
+
 /// One connection to an OpenIGTLink server. Every message is packed with its CRC and sent whole;
 /// a failure to send is a ConnectionError naming the server and the message.
 class OpenIGTLinkSender {
 public:
+  /// Packs the messages into `recorder` instead of sending them (a server sends them to its
+  /// clients: OpenIGTLinkServer). `recorder` must outlive the sender.
+  explicit OpenIGTLinkSender(std::vector<PackedIgtlMessage>& recorder);
   /// Connects to `endpoint`. ConnectionError when the host is unknown or refuses the connection.
   /// `sendTimeoutMs`: a server that stops reading for this long is taken as lost.
   explicit OpenIGTLinkSender(const IgtlEndpoint& endpoint, int sendTimeoutMs = 10000);
@@ -87,6 +97,7 @@ private:
   struct Socket;
   void transmit(const char* type, const std::string& device, const void* data, std::size_t bytes);
   std::unique_ptr<Socket> socket_;
+  std::vector<PackedIgtlMessage>* recorder_ = nullptr;
   IgtlEndpoint endpoint_;
   std::size_t bytesSent_ = 0;
   int messagesSent_ = 0;

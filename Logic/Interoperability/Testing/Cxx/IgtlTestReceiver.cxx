@@ -89,39 +89,55 @@ void readPolyData(igtl::PolyDataMessage* poly, ReceivedMessage& out)
 }
 } // namespace
 
+bool receiveMessage(igtl::ClientSocket* socket, ReceivedMessage& out)
+{
+  auto header = igtl::MessageHeader::New();
+  header->InitPack();
+  const int n = socket->Receive(header->GetPackPointer(), header->GetPackSize());
+  if (n == 0) return false; // the peer closed the connection (or the receive timed out)
+  if (n != header->GetPackSize()) throw std::runtime_error("connection lost inside a message header");
+  header->Unpack();
+  out = ReceivedMessage{};
+  out.type = header->GetDeviceType();
+  out.device = header->GetDeviceName();
+  if (out.type == "IMAGE") {
+    readImage(unpack<igtl::ImageMessage>(socket, header), out);
+  } else if (out.type == "TRANSFORM") {
+    igtl::Matrix4x4 m;
+    unpack<igtl::TransformMessage>(socket, header)->GetMatrix(m);
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) out.matrix[r][c] = m[r][c];
+  } else if (out.type == "POLYDATA") {
+    readPolyData(unpack<igtl::PolyDataMessage>(socket, header), out);
+  } else if (out.type == "STATUS") {
+    auto status = unpack<igtl::StatusMessage>(socket, header);
+    out.statusCode = status->GetCode();
+    out.statusText = status->GetStatusString();
+  } else {
+    socket->Skip(header->GetBodySizeToRead(), 0);
+  }
+  return true;
+}
+
+std::vector<ReceivedMessage> receiveUntilStatus(igtl::ClientSocket* socket)
+{
+  std::vector<ReceivedMessage> messages;
+  ReceivedMessage m;
+  while (receiveMessage(socket, m)) {
+    messages.push_back(m);
+    if (m.type == "STATUS") return messages;
+  }
+  throw std::runtime_error("the connection ended (or timed out) after " + std::to_string(messages.size()) +
+                           " messages, before a STATUS");
+}
+
 std::vector<ReceivedMessage> IgtlTestReceiver::receiveSession(unsigned long timeoutMs)
 {
   igtl::ClientSocket::Pointer socket = server_->WaitForConnection(timeoutMs);
   if (!socket) throw std::runtime_error("no client connected");
   std::vector<ReceivedMessage> messages;
-  auto header = igtl::MessageHeader::New();
-  while (true) {
-    header->InitPack();
-    const int n = socket->Receive(header->GetPackPointer(), header->GetPackSize());
-    if (n == 0) break; // the client closed the connection
-    if (n != header->GetPackSize()) throw std::runtime_error("connection lost inside a message header");
-    header->Unpack();
-    ReceivedMessage out;
-    out.type = header->GetDeviceType();
-    out.device = header->GetDeviceName();
-    if (out.type == "IMAGE") {
-      readImage(unpack<igtl::ImageMessage>(socket, header), out);
-    } else if (out.type == "TRANSFORM") {
-      igtl::Matrix4x4 m;
-      unpack<igtl::TransformMessage>(socket, header)->GetMatrix(m);
-      for (int r = 0; r < 4; ++r)
-        for (int c = 0; c < 4; ++c) out.matrix[r][c] = m[r][c];
-    } else if (out.type == "POLYDATA") {
-      readPolyData(unpack<igtl::PolyDataMessage>(socket, header), out);
-    } else if (out.type == "STATUS") {
-      auto status = unpack<igtl::StatusMessage>(socket, header);
-      out.statusCode = status->GetCode();
-      out.statusText = status->GetStatusString();
-    } else {
-      socket->Skip(header->GetBodySizeToRead(), 0);
-    }
-    messages.push_back(std::move(out));
-  }
+  ReceivedMessage out;
+  while (receiveMessage(socket, out)) messages.push_back(std::move(out));
   socket->CloseSocket();
   return messages;
 }

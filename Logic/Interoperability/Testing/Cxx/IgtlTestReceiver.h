@@ -46,6 +46,12 @@ private:
   int port_ = 0;
 };
 
+/// Receives one message (CRC checked); false when the peer closed the connection or the socket's
+/// receive timeout passed. Throws on a truncated message or an unpack failure.
+bool receiveMessage(igtl::ClientSocket* socket, ReceivedMessage& message);
+/// Receives messages up to and with the next STATUS; throws if the connection ends first.
+std::vector<ReceivedMessage> receiveUntilStatus(igtl::ClientSocket* socket);
+
 /// 64-bit FNV-1a of bytes: the checksum the tests print and compare.
 std::uint64_t fnv1a(const void* data, std::size_t bytes);
 

@@ -6,6 +6,13 @@
 //   compare-dicom SERIES FILE     reads SERIES with ITK's GDCM reader and compares it with FILE (a
 //                                 volume, or a displacement field whose magnitude is compared):
 //                                 same physical grid, values within half the series' RescaleSlope.
+//   igtl-watch-client PORT SESSION SCAN
+//                                 a client of `watch --igtl-server 127.0.0.1:PORT` (see igtlWatchClient).
+//   check-seg SEG LABELS SERIES   reads the DICOM Segmentation SEG with DCMTK's reader and checks it
+//                                 against the label volume LABELS and the MR series SERIES it was
+//                                 derived from: a segment per label value present, a frame per slice
+//                                 from the label's first to its last, each segment's voxels the
+//                                 label's, the series' study and Frame of Reference.
 // Exit 0 when every check holds, 1 otherwise, with one line per finding.
 #include "IgtlTestReceiver.h"
 #include "ModelIO.h"
@@ -16,9 +23,13 @@
 
 #include <dcmtk/config/osconfig.h>
 #include <dcmtk/dcmdata/dctk.h>
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+#include "DicomSegmentationReadBack.h"
+#endif
 
 #include <igtlImageMessage.h>
 #include <igtlStatusMessage.h>
+#include <igtl_util.h>
 
 #include <itkImageRegionConstIteratorWithIndex.h>
 #include <vtkDataArray.h>
@@ -30,6 +41,9 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <thread>
+#include <chrono>
+#include <cstring>
 
 namespace fs = std::filesystem;
 using namespace brainshift;
@@ -108,11 +122,9 @@ void checkSurface(const ReceivedMessage& m, vtkPolyData& surface)
   check(valuesOk, m.device + ": DisplacementMagnitude values (" + std::to_string(m.attribute.size()) + ")");
 }
 
-int igtlServer(const fs::path& portFile, const fs::path& outputDir)
+/// Every message of one update against the files of `outputDir`: type, device, grid, checksum.
+void checkUpdate(const std::vector<ReceivedMessage>& messages, const fs::path& outputDir)
 {
-  testing::IgtlTestReceiver receiver;
-  writePortFile(portFile, receiver.port());
-  const std::vector<ReceivedMessage> messages = receiver.receiveSession();
   const UpdateFolderContents contents = inspectUpdateFolder(outputDir);
   std::map<std::string, const ReceivedMessage*> byDevice;
   for (const ReceivedMessage& m : messages) byDevice[m.device] = &m;
@@ -141,6 +153,93 @@ int igtlServer(const fs::path& portFile, const fs::path& outputDir)
         "STATUS brainshift OK comes last");
   const std::size_t expected = 1 + contents.warpedVolumes.size() + 3;
   check(messages.size() == expected, std::to_string(messages.size()) + " messages, expected " + std::to_string(expected));
+}
+
+int igtlServer(const fs::path& portFile, const fs::path& outputDir)
+{
+  testing::IgtlTestReceiver receiver;
+  writePortFile(portFile, receiver.port());
+  checkUpdate(receiver.receiveSession(), outputDir);
+  return failures ? 1 : 0;
+}
+
+/// A client of `watch --igtl-server` on 127.0.0.1:port, retrying for up to a minute while the session starts.
+igtl::ClientSocket::Pointer connectToWatch(int port)
+{
+  for (int attempt = 0; attempt < 600; ++attempt) {
+    auto socket = igtl::ClientSocket::New();
+    if (socket->ConnectToServer("127.0.0.1", port) == 0) {
+      socket->SetReceiveTimeout(120000); // every wait bounded: a registration of the small case takes seconds
+      return socket;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  throw std::runtime_error("cannot connect to the watch session's server on 127.0.0.1:" + std::to_string(port));
+}
+
+/// IMAGE intraop (float32, RAS, the matrix's translation the volume's centre) of `image`.
+void sendScan(igtl::ClientSocket* socket, const ScalarImage& image)
+{
+  const ImageGeometry g = ImageGeometry::of(&image);
+  auto message = igtl::ImageMessage::New();
+  message->SetDeviceName("intraop");
+  message->SetDimensions(int(g.size[0]), int(g.size[1]), int(g.size[2]));
+  message->SetSpacing(float(g.spacing[0]), float(g.spacing[1]), float(g.spacing[2]));
+  message->SetScalarType(igtl::ImageMessage::TYPE_FLOAT32);
+  message->SetEndian(igtl_is_little_endian() ? igtl::ImageMessage::ENDIAN_LITTLE : igtl::ImageMessage::ENDIAN_BIG);
+  message->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+  igtl::Matrix4x4 m;
+  const Matrix4 matrix = igtlImageMatrix(g);
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m[r][c] = float(matrix[r][c]);
+  message->SetMatrix(m);
+  message->AllocateScalars();
+  std::memcpy(message->GetScalarPointer(), image.GetBufferPointer(), message->GetImageSize());
+  message->Pack();
+  if (socket->Send(message->GetPackPointer(), message->GetPackSize()) != 1) throw std::runtime_error("cannot send IMAGE intraop");
+}
+
+/// The navigation side of `watch --igtl-server`: a client that drops out after one message header,
+/// a client that receives the first scan's update, a client that connects after it and gets it on
+/// connecting, then IMAGE intraop from SCAN that becomes the second scan, whose update both receive.
+int igtlWatchClient(int port, const fs::path& session, const fs::path& scanFile)
+{
+  std::thread dropping([port] {
+    try {
+      auto socket = connectToWatch(port);
+      char header[58];
+      socket->Receive(header, sizeof header); // inside the first update
+      socket->CloseSocket();
+    } catch (const std::exception& e) {
+      std::cout << "FAILED  dropping client: " << e.what() << '\n';
+    }
+  });
+  auto first = connectToWatch(port);
+  std::cout << "-- first client, scan 1\n";
+  checkUpdate(testing::receiveUntilStatus(first), session / "scan-01");
+  dropping.join();
+  const auto connecting = std::chrono::steady_clock::now();
+  auto late = connectToWatch(port);
+  const std::vector<ReceivedMessage> latest = testing::receiveUntilStatus(late);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - connecting).count();
+  std::size_t bytes = 0;
+  for (const ReceivedMessage& m : latest) bytes += m.values.size() + m.points.size() * 12 + m.attribute.size() * 4;
+  std::cout << "-- client connected after scan 1: the latest update on connecting (" << latest.size() << " messages, "
+            << bytes / 1000 << " kB of values, connect to STATUS " << seconds << " s)\n";
+  checkUpdate(latest, session / "scan-01");
+  ScalarImage::Pointer scan = readScalarVolume(scanFile);
+  sendScan(first, *scan);
+  for (auto* client : {first.GetPointer(), late.GetPointer()}) {
+    std::cout << "-- scan 2 (IMAGE intraop)\n";
+    const std::vector<ReceivedMessage> update = testing::receiveUntilStatus(client);
+    checkUpdate(update, session / "scan-02");
+    // The scan sent comes back as the update's intraop_image: same grid, same values.
+    for (const ReceivedMessage& m : update) {
+      if (m.device == "intraop_image") checkImage(m, *scan, igtl::ImageMessage::TYPE_FLOAT32);
+    }
+  }
+  first->CloseSocket();
+  late->CloseSocket();
   return failures ? 1 : 0;
 }
 
@@ -196,6 +295,57 @@ int compareDicom(const fs::path& series, const fs::path& file)
                                    std::to_string(worstValue) + ")");
   return failures ? 1 : 0;
 }
+
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+std::string fileTag(const fs::path& file, const DcmTagKey& tag)
+{
+  DcmFileFormat dicom;
+  OFString value;
+  if (dicom.loadFile(file.c_str()).bad()) return {};
+  dicom.getDataset()->findAndGetOFString(tag, value);
+  return value.c_str();
+}
+
+int checkSegmentation(const fs::path& segFile, const fs::path& labelsFile, const fs::path& series)
+{
+  const testing::ReadBackSegmentation seg = testing::readBackSegmentation(segFile.string());
+  ScalarImage::Pointer labels = readScalarVolume(labelsFile);
+  const ImageGeometry g = ImageGeometry::of(labels.GetPointer());
+  std::map<int, std::size_t> voxels, firstSlice, lastSlice;
+  for (std::size_t i = 0; i < g.numberOfVoxels(); ++i) {
+    const int value = static_cast<int>(labels->GetBufferPointer()[i]);
+    if (value == 0) continue;
+    const std::size_t k = i / (g.size[0] * g.size[1]);
+    if (!voxels.count(value)) firstSlice[value] = k;
+    ++voxels[value];
+    lastSlice[value] = k;
+  }
+  check(seg.modality == "SEG", segFile.string() + ": Modality SEG (" + seg.modality + ")");
+  check(seg.segments.size() == voxels.size(), segFile.string() + ": " + std::to_string(voxels.size()) + " segments (" +
+                                                std::to_string(seg.segments.size()) + ")");
+  std::size_t s = 0;
+  for (const auto& [value, count] : voxels) {
+    if (s >= seg.segments.size()) break;
+    const testing::ReadBackSegment& segment = seg.segments[s++];
+    const std::size_t frames = lastSlice[value] - firstSlice[value] + 1;
+    check(segment.frames == frames, segFile.string() + ": segment '" + segment.label + "' has " + std::to_string(frames) +
+                                      " frames (" + std::to_string(segment.frames) + ")");
+    check(segment.voxels == count, segFile.string() + ": segment '" + segment.label + "' has label " + std::to_string(value) +
+                                     "'s " + std::to_string(count) + " voxels (" + std::to_string(segment.voxels) + ")");
+    std::cout << "segment " << s << " '" << segment.label << "': " << segment.frames << " frames, " << segment.voxels << " voxels\n";
+  }
+  check(seg.studyUid == fileTag(series / "IM0001.dcm", DCM_StudyInstanceUID), segFile.string() + ": the series' StudyInstanceUID");
+  check(seg.frameOfReferenceUid == fileTag(series / "IM0001.dcm", DCM_FrameOfReferenceUID),
+        segFile.string() + ": the series' FrameOfReferenceUID");
+  if (!seg.segments.empty() && !voxels.empty()) {
+    char slice[32];
+    std::snprintf(slice, sizeof slice, "IM%04zu.dcm", firstSlice[voxels.begin()->first] + 1);
+    check(seg.segments[0].sourceInstances.at(0) == fileTag(series / slice, DCM_SOPInstanceUID),
+          segFile.string() + ": the first frame derived from " + (series / slice).string());
+  }
+  return failures ? 1 : 0;
+}
+#endif
 } // namespace
 
 int main(int argc, char** argv)
@@ -211,11 +361,15 @@ int main(int argc, char** argv)
       return 0;
     }
     if (command == "compare-dicom" && argc == 4) return compareDicom(argv[2], argv[3]);
+    if (command == "igtl-watch-client" && argc == 5) return igtlWatchClient(std::stoi(argv[2]), argv[3], argv[4]);
+#ifdef BRAINSHIFT_HAVE_DCMSEG
+    if (command == "check-seg" && argc == 5) return checkSegmentation(argv[2], argv[3], argv[4]);
+#endif
   } catch (const std::exception& e) {
     std::cout << "FAILED  " << e.what() << '\n';
     return 1;
   }
   std::cerr << "usage: brainshift-interop-test-tool igtl-server PORTFILE OUTDIR | igtl-refuse PORTFILE | "
-               "compare-dicom SERIES FILE\n";
+               "compare-dicom SERIES FILE | igtl-watch-client PORT SESSION SCAN | check-seg SEG LABELS SERIES\n";
   return 2;
 }
