@@ -243,6 +243,76 @@ OneLineDiagnostics)
     --output-dir "$out/rigid"
   ;;
 
+StageCaseIdentity)
+  # A stage alone checks the case as register does: a folder holding another case's results is
+  # refused (exit 2, nothing written) unless --overwrite.
+  out=$work/reliability-identity
+  rm -rf "$out" && mkdir -p "$out/inputs"
+  # Another case: the small case's labels with 20 voxels of parenchyma turned to CSF.
+  python3 - "$L" "$out/inputs/other-labels.nii.gz" <<'PY'
+import gzip, struct, sys
+data = bytearray(gzip.open(sys.argv[1]).read())
+offset = int(struct.unpack_from('<f', data, 108)[0])
+changed = 0
+for i in range(offset, len(data)):
+    if data[i] == 2 and changed < 20:
+        data[i] = 3
+        changed += 1
+gzip.open(sys.argv[2], 'wb').write(bytes(data))
+PY
+  "$brainshift" mesh --preop-labels "$L" --output-dir "$out/mesh" >/dev/null || fail "mesh exited $?"
+  grep -q '"preop_labels"' "$out/mesh/report.json" || fail "mesh recorded no case_inputs in report.json"
+  before=$(sha256sum "$out/mesh/mesh.vtu" "$out/mesh/report.json")
+  expect 2 "$out/mesh: holds the results of another case" -- "$brainshift" mesh --preop-labels "$out/inputs/other-labels.nii.gz" \
+    --output-dir "$out/mesh"
+  [ "$before" = "$(sha256sum "$out/mesh/mesh.vtu" "$out/mesh/report.json")" ] || fail "a refused stage changed the folder"
+  # The same case's other stages are welcome (the labels agree; the image is new to the report).
+  "$brainshift" rigid --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/mesh" >/dev/null ||
+    fail "rigid of the same case into its folder exited $?"
+  grep -q '"preop_image"' "$out/mesh/report.json" || fail "rigid did not add its image to case_inputs"
+  # register's folder (the demo's) refuses a stage of another case too.
+  mkdir -p "$out/register" && cp "$demo/report.json" "$demo/mesh.vtu" "$out/register/"
+  expect 2 "holds the results of another case" -- "$brainshift" classify --preop-labels "$out/inputs/other-labels.nii.gz" \
+    --intraop-image "$I" --output-dir "$out/register"
+  # --overwrite replaces them, and the report starts afresh with the new case.
+  "$brainshift" mesh --preop-labels "$out/inputs/other-labels.nii.gz" --output-dir "$out/mesh" --overwrite >/dev/null ||
+    fail "mesh --overwrite exited $?"
+  grep -q "other-labels.nii.gz" "$out/mesh/report.json" || fail "--overwrite did not record the new case"
+  grep -q '"preop_image"' "$out/mesh/report.json" && fail "--overwrite kept the other case's entries in report.json"
+  no_temporaries "$out"
+  ;;
+
+RigidDegenerateImages)
+  # Images too small or featureless to register: bad input (exit 2), one line, no transform.
+  out=$work/reliability-degenerate
+  rm -rf "$out" && mkdir -p "$out/inputs"
+  python3 - "$I" "$out/inputs" <<'PY'
+import gzip, struct, sys
+data = bytearray(gzip.open(sys.argv[1]).read())
+offset = int(struct.unpack_from('<f', data, 108)[0])
+dims = struct.unpack_from('<8h', data, 40)
+datatype, bitpix = struct.unpack_from('<hh', data, 70)
+nbytes = bitpix // 8
+header = bytearray(data[:offset])
+# A 4x4x4 image: the header's dimensions, the first 64 voxels.
+tiny = bytearray(header)
+struct.pack_into('<8h', tiny, 40, 3, 4, 4, 4, 1, 1, 1, 1)
+gzip.open(sys.argv[2] + '/tiny.nii.gz', 'wb').write(bytes(tiny + data[offset:offset + 64 * nbytes]))
+# The full grid with zeros but one voxel (its first byte), and a constant image (all bytes equal).
+n = dims[1] * dims[2] * dims[3] * nbytes
+speck = bytearray(n); centre = (n // 2) // nbytes * nbytes
+speck[centre:centre + nbytes] = data[offset + centre:offset + centre + nbytes] if any(data[offset + centre:offset + centre + nbytes]) else b'\x40' * nbytes
+gzip.open(sys.argv[2] + '/speck.nii.gz', 'wb').write(bytes(header + speck))
+gzip.open(sys.argv[2] + '/constant.nii.gz', 'wb').write(bytes(header + b'\x40' * n))
+PY
+  expect 2 "too small to register" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/tiny.nii.gz" --output-dir "$out/tiny"
+  expect 2 "foreground is too small to register" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/speck.nii.gz" \
+    --output-dir "$out/speck"
+  expect 2 "a constant image" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/constant.nii.gz" --output-dir "$out/constant"
+  [ -n "$(find "$out" -name rigid_intraop_to_preop.tfm)" ] && fail "a refused registration wrote a transform"
+  no_temporaries "$out"
+  ;;
+
 *)
   echo "unknown case $case_name" >&2
   exit 2
