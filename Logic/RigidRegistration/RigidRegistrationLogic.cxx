@@ -2,6 +2,7 @@
 
 #include "DistanceMaps.h"
 #include "IntensityStatistics.h"
+#include "LibraryMessages.h"
 
 #include <itkBinShrinkImageFilter.h>
 #include <itkCommand.h>
@@ -15,6 +16,7 @@
 #include <itkVersorRigid3DTransform.h>
 
 #include <algorithm>
+#include <limits>
 #include <mutex>
 #include <cmath>
 #include <numeric>
@@ -287,6 +289,7 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
   std::size_t low[3] = {size[0], size[1], size[2]}, high[3] = {0, 0, 0};
   const float* v = image.GetBufferPointer();
   std::size_t count = 0;
+  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
   for (std::size_t z = 0, i = 0; z < size[2]; ++z) {
     for (std::size_t y = 0; y < size[1]; ++y) {
       for (std::size_t x = 0; x < size[0]; ++x, ++i) {
@@ -296,11 +299,19 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
           low[d] = std::min(low[d], at[d]);
           high[d] = std::max(high[d], at[d]);
         }
+        lowest = std::min(lowest, v[i]);
+        highest = std::max(highest, v[i]);
         ++count;
       }
     }
   }
   if (count == 0) throw InputError("the " + which + " image has no foreground to register");
+  if (lowest == highest) {
+    std::ostringstream why;
+    why << "the " << which << " image's foreground is uniform (every voxel above the background is " << lowest
+        << "): no feature to register";
+    throw InputError(why.str());
+  }
   for (int d = 0; d < 3; ++d) {
     if (high[d] - low[d] + 1 < minimumVoxels) {
       std::ostringstream why;
@@ -391,8 +402,9 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
   return prepared;
 }
 
-RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
-                                        const RigidRegistrationParameters& parameters)
+namespace {
+RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                                 const RigidRegistrationParameters& parameters)
 {
   parameters.validate();
   RigidRegistrationResult result;
@@ -556,6 +568,19 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
     }
   }
   return result;
+}
+} // namespace
+
+RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                        const RigidRegistrationParameters& parameters)
+{
+  try {
+    return registerRigidlyUnguarded(intraop, preop, preopLabels, parameters);
+  } catch (const itk::ExceptionObject& e) {
+    // ITK's metric gives up on images it cannot measure (no sample inside the virtual domain, a
+    // zero intensity range): a registration that failed, said in one line.
+    throw MethodError("rigid registration failed on these images: " + oneLine(e.GetDescription()));
+  }
 }
 
 } // namespace brainshift

@@ -12,7 +12,7 @@ configuration (to `mesh --config`, every fifth to `simulate --config`, which sta
 the .mrml scene (to `bench read-scene`, the host-free scene reader).
 
 Checked on each run: the exit status is 0, 1 or 2 (no signal, no other status, no hang); on failure
-exactly one line on stderr; no process left in the run's session (the finite element worker's
+exactly one error line on stderr (lines that start with "warning: " are not errors); no process left in the run's session (the finite element worker's
 process group included); no `.tmp-*` file left; a refused run (2) leaves no output folder behind;
 no zero-length output; the input file unchanged. Writes OUT/runs.csv and OUT/summary.json.
 """
@@ -350,6 +350,7 @@ def main():
         config_text = f.read()
     case_files = {p: sha256(os.path.join(case.case, p)) for p in os.listdir(case.case)
                   if os.path.isfile(os.path.join(case.case, p))}
+    shutil.rmtree(os.path.join(options.output_dir, "failing-inputs"), ignore_errors=True)
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     rows, problems = [], []
     counts = {"inputs": 0, "exit_0": 0, "exit_1": 0, "exit_2": 0, "crashes": 0, "hangs": 0, "orphans": 0,
@@ -376,9 +377,10 @@ def main():
         else:
             counts["crashes"] += 1
             findings.append(f"crash: exit status {status}" + (f" (signal {-status})" if status < 0 else ""))
-        if status != 0 and len(lines) != 1:
+        errors = [line for line in lines if not line.startswith("warning: ")]  # warnings are not errors
+        if status != 0 and len(errors) != 1:
             counts["stderr_not_one_line"] += 1
-            findings.append(f"{len(lines)} stderr lines")
+            findings.append(f"{len(errors)} error lines on stderr")
         if left:
             counts["orphans"] += len(left)
             findings.append(f"{len(left)} processes left")
@@ -401,9 +403,12 @@ def main():
         k["seconds"] += seconds
         rows.append({"input": i, "kind": kind, "command": args[0] if args[0] != "bench" else "bench read-scene",
                      "mutation": what, "status": status, "seconds": f"{seconds:.2f}",
-                     "stderr": lines[0][:300] if lines else "", "findings": "; ".join(findings)})
+                     "stderr": (errors or lines or [""])[0][:300], "findings": "; ".join(findings)})
         if findings:
             problems.append(rows[-1])
+            kept = os.path.join(options.output_dir, "failing-inputs")
+            os.makedirs(kept, exist_ok=True)
+            shutil.copy(path, os.path.join(kept, f"input-{i:04d}-{os.path.basename(path)}"))
             print(f"input {i} ({kind}, {what}): {'; '.join(findings)}; stderr: {err.strip()[:500]}", file=sys.stderr)
         shutil.rmtree(folder, ignore_errors=True)
     for name, digest in case_files.items():

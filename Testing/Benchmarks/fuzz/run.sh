@@ -31,7 +31,7 @@ while [ $# -gt 0 ]; do
 done
 
 require_brainshift
-prepare_output machine.txt runs.csv summary.json summary.md
+prepare_output machine.txt runs.csv summary.json summary.md failing-inputs/
 write_machine_description
 work=$(mktemp -d "${TMPDIR:-/tmp}/brainshift-fuzz.XXXXXX")
 trap 'rm -rf "$work"' EXIT
