@@ -306,12 +306,6 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
     }
   }
   if (count == 0) throw InputError("the " + which + " image has no foreground to register");
-  if (lowest == highest) {
-    std::ostringstream why;
-    why << "the " << which << " image's foreground is uniform (every voxel above the background is " << lowest
-        << "): no feature to register";
-    throw InputError(why.str());
-  }
   for (int d = 0; d < 3; ++d) {
     if (high[d] - low[d] + 1 < minimumVoxels) {
       std::ostringstream why;
@@ -320,6 +314,12 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
           << " mm level (" << count << " voxels); rigid registration needs " << minimumVoxels << " along each axis";
       throw InputError(why.str());
     }
+  }
+  if (lowest == highest) {
+    std::ostringstream why;
+    why << "the " << which << " image's foreground is uniform (every voxel above the background is " << lowest
+        << "): no feature to register";
+    throw InputError(why.str());
   }
 }
 

@@ -169,9 +169,12 @@ def mutate_json(rng, document):
                 paths.append(path + [k])
                 walk(v, path + [k])
 
-    walk(document, [])
     changed = []
     for _ in range(rng.randint(1, 3)):
+        paths.clear()
+        walk(document, [])  # afresh: an earlier change may have replaced a subtree
+        if not paths:
+            break
         path = rng.choice(paths)
         parent = document
         for k in path[:-1]:
