@@ -33,6 +33,8 @@ import sys
 import time
 
 KINDS = ["nifti-header", "nifti-data", "nifti-gzip", "labels", "landmarks", "transform", "config", "scene"]
+if os.environ.get("FUZZ_KINDS"):  # a subset, for a closer look: FUZZ_KINDS=scene,config
+    KINDS = os.environ["FUZZ_KINDS"].split(",")
 TIMEOUT_S = 180
 
 # NIfTI-1 header fields worth breaking: (offset, struct format).
@@ -275,11 +277,25 @@ def make_input(rng, kind, case, folder, config_text):
     # scene: the demo's scene beside links to its data files, the scene text corrupted
     scene_folder = os.path.join(folder, "scene")
     os.makedirs(scene_folder)
-    for name in os.listdir(case.demo):
-        if os.path.isfile(os.path.join(case.demo, name)) and name != "scene.mrml":
+    for name in os.listdir(case.demo):  # its data files and case/ (the scene refers to the case's images)
+        if name != "scene.mrml":
             os.symlink(os.path.join(case.demo, name), os.path.join(scene_folder, name))
     with open(case.scene, encoding="utf-8") as f:
-        text, what = mutate_text(rng, f.read())
+        text = f.read()
+    if rng.random() < 0.5:  # well-formed XML, values gone wrong: the reader's checks, not the parser's
+        attributes = list(re.finditer(r'(\w+)="([^"]*)"', text))
+        changed = []
+        for _ in range(rng.randint(1, 3)):
+            m = rng.choice(attributes)
+            value = rng.choice(["", "nan", "inf", "-1", "0", "1e308", "x" * 5000, "vtkMRMLNoSuchNode1", "a;b;c",
+                                " ".join(["1"] * 15), " ".join(["nan"] * 16), "storage:;display:;", "&amp;&lt;"])
+            start, end = m.span(2)
+            text = text[:start] + value + text[end:]
+            changed.append(f"{m.group(1)}={value[:20]}")
+            attributes = list(re.finditer(r'(\w+)="([^"]*)"', text))
+        what = "attributes " + " ".join(changed)
+    else:
+        text, what = mutate_text(rng, text)
     if rng.random() < 0.3:  # a file name that leads somewhere else
         text = re.sub(r'fileName="[^"]*"', rng.choice(['fileName=""', 'fileName="/etc/passwd"', 'fileName="../../x.nii.gz"',
                                                        'fileName="missing.vtp"', 'fileName="scene.mrml"']), text, count=1)
@@ -287,7 +303,7 @@ def make_input(rng, kind, case, folder, config_text):
     path = os.path.join(scene_folder, "scene.mrml")
     with open(path, "w", encoding="utf-8") as f:
         f.write(text)
-    return path, ["bench", "read-scene", "--scene", path], None, "text " + what
+    return path, ["bench", "read-scene", "--scene", path], None, what
 
 
 def session_processes(sid):
@@ -348,7 +364,7 @@ def main():
     parser.add_argument("--inputs", type=int, default=300)
     options = parser.parse_args()
 
-    case = Case(options.demo)
+    case = Case(os.path.abspath(options.demo))
     with open(options.config, encoding="utf-8") as f:
         config_text = f.read()
     case_files = {p: sha256(os.path.join(case.case, p)) for p in os.listdir(case.case)
