@@ -289,7 +289,6 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
   std::size_t low[3] = {size[0], size[1], size[2]}, high[3] = {0, 0, 0};
   const float* v = image.GetBufferPointer();
   std::size_t count = 0;
-  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
   for (std::size_t z = 0, i = 0; z < size[2]; ++z) {
     for (std::size_t y = 0; y < size[1]; ++y) {
       for (std::size_t x = 0; x < size[0]; ++x, ++i) {
@@ -299,8 +298,6 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
           low[d] = std::min(low[d], at[d]);
           high[d] = std::max(high[d], at[d]);
         }
-        lowest = std::min(lowest, v[i]);
-        highest = std::max(highest, v[i]);
         ++count;
       }
     }
@@ -314,6 +311,20 @@ void requireForegroundExtent(const ScalarImage& image, double threshold, const s
           << " mm level (" << count << " voxels); rigid registration needs " << minimumVoxels << " along each axis";
       throw InputError(why.str());
     }
+  }
+}
+
+/// InputError when every voxel of `image` above `threshold` has one value: mutual information has
+/// no intensity range to bin (ITK's metric then fails with "A spacing of 0 is not allowed"). Checked
+/// on every pyramid level: a uniform block keeps mixed values at its edges only when shrunk.
+void requireVariedForeground(const ScalarImage& image, double threshold, const std::string& which)
+{
+  const float* v = image.GetBufferPointer();
+  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
+  for (std::size_t i = 0, n = image.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+    if (v[i] <= threshold) continue;
+    lowest = std::min(lowest, v[i]);
+    highest = std::max(highest, v[i]);
   }
   if (lowest == highest) {
     std::ostringstream why;
@@ -398,6 +409,7 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
   prepared->threshold = foregroundThreshold(*prepared->levels.front());
   requireForegroundExtent(*prepared->levels.front(), prepared->threshold, "preoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
+  for (const ScalarImage::Pointer& level : prepared->levels) requireVariedForeground(*level, prepared->threshold, "preoperative");
   if (preopLabels) prepared->mask = movingMaskFrom(*preopLabels, parameters.maskDilationMm);
   return prepared;
 }
@@ -425,6 +437,7 @@ RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, con
   const double fixedThreshold = foregroundThreshold(*fixedLevels.front());
   requireForegroundExtent(*fixedLevels.front(), fixedThreshold, "intraoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
+  for (const ScalarImage::Pointer& level : fixedLevels) requireVariedForeground(*level, fixedThreshold, "intraoperative");
   const double movingThreshold = prepared->threshold;
   const MaskObject::Pointer mask = prepared->mask;
 

@@ -5,7 +5,10 @@
 #include "BrainShiftTestingSupport.h"
 #include "RigidRegistrationTestSupport.h"
 
+#include <itkImageRegionIteratorWithIndex.h>
 #include <itkRegionOfInterestImageFilter.h>
+
+#include <cmath>
 
 #include <iostream>
 
@@ -57,6 +60,17 @@ int RigidRegistrationDegenerateInputTest(int, char*[])
     speck->SetPixel(centre, 500.0f);
     BS_CHECK_THROWS(registerRigidly(*speck, *c.preopImage, c.preopLabels, {}), InputError,
                     "intraoperative image's foreground is too small to register: it spans 1 x 1 x 1");
+
+    // A uniform block (60 voxels a side) in a dark image: a foreground without any feature.
+    const ScalarImage::Pointer block = filledLike(*c.intraopImage, 0.0f);
+    itk::ImageRegionIteratorWithIndex<ScalarImage> voxel(block, block->GetLargestPossibleRegion());
+    for (; !voxel.IsAtEnd(); ++voxel) {
+      bool inside = true;
+      for (unsigned d = 0; d < 3; ++d) inside = inside && std::abs(voxel.GetIndex()[d] - centre[d]) < 30;
+      if (inside) voxel.Set(300.0f);
+    }
+    BS_CHECK_THROWS(registerRigidly(*block, *c.preopImage, c.preopLabels, {}), InputError,
+                    "intraoperative image's foreground is uniform");
 
     // A constant image: no feature at all, on either side.
     const ScalarImage::Pointer constant = filledLike(*c.intraopImage, 120.0f);
