@@ -35,6 +35,8 @@ prepare_output machine.txt runs.csv summary.json summary.md failing-inputs/
 write_machine_description
 work=$(mktemp -d "${TMPDIR:-/tmp}/brainshift-fuzz.XXXXXX")
 trap 'rm -rf "$work"' EXIT
+trap 'exit 130' INT # the EXIT trap then runs too
+trap 'exit 143' TERM
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 if [ -z "$demo" ]; then
   demo=$work/demo
