@@ -85,6 +85,8 @@ SpatialTransform::Pointer readTransform(const fs::path& path)
     reader->Update();
   } catch (const itk::ExceptionObject& e) {
     throw InputError(path.string() + ": cannot read the transform: " + oneLine(e.GetDescription()));
+  } catch (const std::exception& e) { // ITK's text parser lets std::string's errors through on a garbled line
+    throw InputError(path.string() + ": cannot read the transform: the file is garbled (" + oneLine(e.what()) + ")");
   }
   const auto* list = reader->GetTransformList();
   if (list->empty()) {

@@ -73,6 +73,9 @@ itk::ImageIOBase::Pointer readImageHeader(const fs::path& path, unsigned compone
 {
   registerIOFactories();
   requireExistingFile(path);
+  // niftilib prints its own "** ERROR: ..." lines for a bad header and carries on; ITK's exception
+  // (or a null IO) is reported instead, once.
+  MutedStderr quiet;
   itk::ImageIOBase::Pointer io =
     itk::ImageIOFactory::CreateImageIO(path.c_str(), itk::ImageIOFactory::IOFileModeEnum::ReadMode);
   if (!io) {
@@ -102,6 +105,13 @@ itk::ImageIOBase::Pointer readImageHeader(const fs::path& path, unsigned compone
     if (io->GetDimensions(i) < 1 || !(io->GetSpacing(i) > 0) || !std::isfinite(io->GetSpacing(i))) {
       throw InputError(path.string() + ": invalid size or spacing along axis " + std::to_string(i));
     }
+    // A medical image's voxels are micrometres to centimetres; its origin within a few metres.
+    if (io->GetSpacing(i) < 1e-3 || io->GetSpacing(i) > 1e3 || !(std::abs(io->GetOrigin(i)) <= 1e5)) {
+      std::ostringstream message;
+      message << path.string() << ": a voxel size of " << io->GetSpacing(i) << " mm and an origin at " << io->GetOrigin(i)
+              << " mm along axis " << i << " are not those of a medical image (voxels of 0.001 to 1000 mm, origin within 100 m)";
+      throw InputError(message.str());
+    }
   }
   return io;
 }
@@ -111,6 +121,7 @@ typename TImage::Pointer readImageFile(const fs::path& path)
 {
   auto reader = itk::ImageFileReader<TImage>::New();
   reader->SetFileName(path.string());
+  MutedStderr quiet; // niftilib's own "** ERROR" lines; the exception says it once
   try {
     reader->Update();
   } catch (const itk::ExceptionObject& e) {
@@ -138,6 +149,7 @@ struct NiftiTransforms {
   short qformCode = 0, sformCode = 0;
   std::array<std::array<double, 4>, 3> qform{}; // RAS, rows
   std::array<std::array<double, 4>, 3> sform{};
+  std::array<double, 3> pixdim{};
 };
 
 template <class T>
@@ -176,6 +188,7 @@ bool readNiftiTransforms(const fs::path& path, NiftiTransforms& out)
                           {2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)},
                           {2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - c * c - b * b}};
   const double spacing[3] = {dx, dy, dz};
+  out.pixdim = {f(80), f(84), f(88)};
   const double offset[3] = {f(268), f(272), f(276)};
   for (int r = 0; r < 3; ++r) {
     for (int col = 0; col < 3; ++col) out.qform[r][col] = R[r][col] * spacing[col];
@@ -183,6 +196,30 @@ bool readNiftiTransforms(const fs::path& path, NiftiTransforms& out)
     for (int col = 0; col < 4; ++col) out.sform[r][col] = f(280 + 16 * r + 4 * col);
   }
   return true;
+}
+
+/// InputError for a NIfTI header whose geometry holds NaN or infinite numbers (pixdim, and the
+/// qform or sform in use): ITK's reader aborts the process on them (vnl's SVD asserts finite input).
+void requireFiniteNiftiGeometry(const fs::path& path)
+{
+  NiftiTransforms t;
+  if (!readNiftiTransforms(path, t)) return; // not NIfTI-1: ITK's reader decides
+  auto finite = [](const std::array<std::array<double, 4>, 3>& m) {
+    for (const auto& row : m) {
+      for (double v : row) {
+        if (!std::isfinite(v)) return false;
+      }
+    }
+    return true;
+  };
+  for (int i = 0; i < 3; ++i) {
+    if (!std::isfinite(t.pixdim[i])) {
+      throw InputError(path.string() + ": the NIfTI header's voxel size (pixdim) along axis " + std::to_string(i) +
+                       " is not a finite number");
+    }
+  }
+  if (t.qformCode > 0 && !finite(t.qform)) throw InputError(path.string() + ": the NIfTI header's qform holds NaN or infinite numbers");
+  if (t.sformCode > 0 && !finite(t.sform)) throw InputError(path.string() + ": the NIfTI header's sform holds NaN or infinite numbers");
 }
 
 void checkNiftiOrientation(const fs::path& path, const ScalarImage::PointType& itkOrigin, Warnings* warnings)
@@ -394,6 +431,7 @@ ScalarImage::Pointer readScalarVolume(const fs::path& path, Warnings* warnings)
   if (fs::is_directory(path, ec)) {
     return readDicomSeries(path, warnings);
   }
+  if (isNiftiFile(path)) requireFiniteNiftiGeometry(path);
   readImageHeader(path, 1);
   if (isNiftiFile(path)) checkNiftiVoxelData(path);
   ScalarImage::Pointer image = readImageFile<ScalarImage>(path);
@@ -429,6 +467,7 @@ LabelImage::Pointer readLabelVolume(const fs::path& path, Warnings* warnings)
 
 DisplacementFieldImage::Pointer readDisplacementField(const fs::path& path)
 {
+  if (isNiftiFile(path)) requireFiniteNiftiGeometry(path);
   readImageHeader(path, 3);
   if (isNiftiFile(path)) checkNiftiVoxelData(path);
   DisplacementFieldImage::Pointer field = readImageFile<DisplacementFieldImage>(path);

@@ -302,6 +302,7 @@ void addBenchCommand(CLI::App& app)
   addUpdateBenchCommand(*bench);
 
   addSimulateBenchCommand(*bench);
+  addFuzzBenchCommand(*bench);
 
   classifyCommand->callback([classify] {
     for (double v : classify->noise) {

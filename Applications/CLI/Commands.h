@@ -41,5 +41,6 @@ void addMeshBenchCommand(CLI::App& bench); ///< `bench mesh`, MeshBenchCommand.c
 void addSurfaceBenchCommand(CLI::App& bench); ///< `bench surface`, SurfaceBenchCommand.cxx
 void addUpdateBenchCommand(CLI::App& bench);  ///< `bench update`, UpdateBenchCommand.cxx
 void addSimulateBenchCommand(CLI::App& bench); ///< `bench simulate`, SimulateBenchCommand.cxx
+void addFuzzBenchCommand(CLI::App& bench);     ///< `bench read-scene`, FuzzBenchCommand.cxx
 
 } // namespace brainshift::cli

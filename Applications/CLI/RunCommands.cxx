@@ -186,6 +186,33 @@ bool sameCase(const nlohmann::json& a, const nlohmann::json& b)
   }
   return true;
 }
+
+/// Whether `recorded` (a report's "case_inputs") is of another case than `given`: a preoperative
+/// input that both name with different data. An input only one of them names (a stage run with the
+/// labels alone) does not tell.
+bool anotherCase(const nlohmann::json& recorded, const nlohmann::json& given)
+{
+  if (!recorded.is_object()) return true;
+  for (const char* key : {"preop_image", "preop_labels"}) {
+    if (!recorded.contains(key) || !given.contains(key)) continue;
+    const nlohmann::json &a = recorded[key], &b = given[key];
+    if (!a.is_object() || !a.contains("fingerprint") || a["fingerprint"] != b["fingerprint"]) return true;
+  }
+  return false;
+}
+
+/// Refuses (InputError) a report of another case unless --overwrite, which starts it afresh.
+void refuseAnotherCase(RunContext& context, const nlohmann::json& given)
+{
+  const nlohmann::json& existing = context.report().document();
+  if (!existing.contains("case_inputs") || !anotherCase(existing["case_inputs"], given)) return;
+  if (!context.options().overwrite) {
+    throw InputError(context.options().outputDir.string() +
+                     ": holds the results of another case (its preoperative image or labels differ); choose another "
+                     "--output-dir, or pass --overwrite to replace them");
+  }
+  context.report().clear();
+}
 } // namespace
 
 nlohmann::json caseFingerprint(RunContext& context)
@@ -197,6 +224,26 @@ nlohmann::json caseFingerprint(RunContext& context)
   return {{"preop_image", entry(options.preopImage, fingerprintOf(context.preopImage("register")))},
           {"preop_labels", entry(options.preopLabels, fingerprintOf(context.preopLabels("register")))},
           {"intraop_image", entry(options.intraopImage, fingerprintOf(context.intraopImage("register")))}};
+}
+
+void claimCaseForStage(RunContext& context, const std::string& stage)
+{
+  const RunOptions& options = context.options();
+  auto entry = [](const fs::path& path, const std::string& fingerprint) {
+    return nlohmann::json{{"path", fs::absolute(path).lexically_normal().string()}, {"fingerprint", fingerprint}};
+  };
+  nlohmann::json given = nlohmann::json::object();
+  if (!options.preopImage.empty()) given["preop_image"] = entry(options.preopImage, fingerprintOf(context.preopImage(stage)));
+  if (!options.preopLabels.empty()) given["preop_labels"] = entry(options.preopLabels, fingerprintOf(context.preopLabels(stage)));
+  if (!options.intraopImage.empty()) {
+    given["intraop_image"] = entry(options.intraopImage, fingerprintOf(context.intraopImage(stage)));
+  }
+  if (given.empty()) return; // nothing names the case (simulate works on the folder's own files)
+  refuseAnotherCase(context, given);
+  const nlohmann::json& existing = context.report().document();
+  nlohmann::json recorded = existing.contains("case_inputs") ? existing["case_inputs"] : nlohmann::json::object();
+  for (const auto& [key, value] : given.items()) recorded[key] = value;
+  context.report().set("case_inputs", recorded);
 }
 
 void RunContext::usePreviousScan(const nlohmann::json& fingerprint)
@@ -290,15 +337,7 @@ void runRegistration(RunContext& context)
   claimOutputFolder(context.options().outputDir); // one writer per folder; a no-op when the command did
   context.loadAllInputs();
   const nlohmann::json fingerprint = caseFingerprint(context);
-  const nlohmann::json& existing = context.report().document();
-  if (existing.contains("case_inputs") && !sameCase(existing["case_inputs"], fingerprint)) {
-    if (!context.options().overwrite) {
-      throw InputError(context.options().outputDir.string() +
-                       ": holds the results of another case (its preoperative image or labels differ); choose another "
-                       "--output-dir, or pass --overwrite to replace them");
-    }
-    context.report().clear();
-  }
+  refuseAnotherCase(context, fingerprint);
   context.usePreviousScan(fingerprint);
   context.report().set("case_inputs", fingerprint);
   if (!context.options().previous.empty()) {

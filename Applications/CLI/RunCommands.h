@@ -109,6 +109,11 @@ private:
 /// of the same case has the same preoperative data.
 nlohmann::json caseFingerprint(RunContext& context);
 
+/// A stage alone: refuses an output folder whose report records another case's preoperative
+/// image or labels than those given (InputError, before the stage works) unless --overwrite (then
+/// the report starts afresh), and records the given inputs' fingerprints in "case_inputs".
+void claimCaseForStage(RunContext& context, const std::string& stage);
+
 /// `register`: reads and checks the inputs, refuses an output folder whose report records another
 /// case's inputs (InputError, before anything is written) unless --overwrite (then the report
 /// starts afresh), takes the previous scan (--previous), records the case's fingerprint, and runs

@@ -100,6 +100,7 @@ void addStageCommands(CLI::App& app)
     const StageFlags flags = flagsOf(stage.name);
     addRunOptions(command, *options, flags.required, flags.offered, flags.solver, flags.mesh,
                   stage.name == "classify" || stage.name == "refine");
+    command->add_flag("--overwrite", options->overwrite, "replace another case's results in --output-dir");
     command->callback([options, stage] {
       const Configuration configuration = configurationFor(*options);
       claimFolderOf(*options);
@@ -109,6 +110,7 @@ void addStageCommands(CLI::App& app)
       }
       RunReport report(options->outputDir / "report.json");
       RunContext context(*options, configuration, report);
+      claimCaseForStage(context, stage.name);
       stage.run(context);
       report.save();
     });

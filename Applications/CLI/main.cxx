@@ -3,9 +3,25 @@
 #include "BrainShiftErrors.h"
 #include "Commands.h"
 #include "LibraryDiagnostics.h"
+#include "LibraryMessages.h"
 #include "SignalHandling.h"
 
+#include <itkMacro.h>
+
 #include <iostream>
+#include <string>
+
+namespace {
+/// Exactly one line on stderr per error: a message that quotes a file's content (a CSV field, a
+/// scene attribute) may carry line breaks and control characters of its own.
+std::string singleLine(const std::string& message)
+{
+  std::string line;
+  for (char c : message) line += (c == '\n' || c == '\r' || c == '\v' || c == '\f') ? ' ' : c;
+  while (!line.empty() && line.back() == ' ') line.pop_back();
+  return line;
+}
+} // namespace
 
 int main(int argc, char** argv)
 {
@@ -38,13 +54,16 @@ int main(int argc, char** argv)
     std::cerr << "brainshift: " << e.what() << " (see brainshift --help)\n";
     return 2;
   } catch (const brainshift::InputError& e) {
-    std::cerr << "brainshift: " << e.what() << '\n';
+    std::cerr << "brainshift: " << singleLine(e.what()) << '\n';
     return 2;
   } catch (const brainshift::MethodError& e) {
-    std::cerr << "brainshift: " << e.what() << '\n';
+    std::cerr << "brainshift: " << singleLine(e.what()) << '\n';
+    return 1;
+  } catch (const itk::ExceptionObject& e) { // its what() starts with the source file's path on a line of its own
+    std::cerr << "brainshift: internal error: " << brainshift::oneLine(e.GetDescription()) << '\n';
     return 1;
   } catch (const std::exception& e) {
-    std::cerr << "brainshift: internal error: " << e.what() << '\n';
+    std::cerr << "brainshift: internal error: " << singleLine(e.what()) << '\n';
     return 1;
   }
   return 0;

@@ -2,6 +2,7 @@
 
 #include "DistanceMaps.h"
 #include "IntensityStatistics.h"
+#include "LibraryMessages.h"
 
 #include <itkBinShrinkImageFilter.h>
 #include <itkCommand.h>
@@ -15,6 +16,7 @@
 #include <itkVersorRigid3DTransform.h>
 
 #include <algorithm>
+#include <limits>
 #include <mutex>
 #include <cmath>
 #include <numeric>
@@ -252,6 +254,86 @@ double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& 
   return hJoint > 0 ? (hF + hM) / hJoint : 1.0;
 }
 
+/// InputError when `image` cannot be registered at all: every voxel the same, or too small for
+/// `minimumVoxels` voxels of the coarsest level (`coarsestMm`) along an axis.
+void requireRegistrableImage(const ScalarImage& image, const std::string& which, double coarsestMm, unsigned minimumVoxels)
+{
+  const float* v = image.GetBufferPointer();
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
+  const auto range = std::minmax_element(v, v + n);
+  if (n == 0 || *range.first == *range.second) {
+    std::ostringstream why;
+    why << "the " << which << " image is constant (every voxel " << (n ? *range.first : 0.0f)
+        << "): no foreground or feature to register";
+    throw InputError(why.str());
+  }
+  const double minimumMm = coarsestMm * minimumVoxels;
+  for (unsigned i = 0; i < 3; ++i) {
+    if (double(size[i]) * image.GetSpacing()[i] < minimumMm) {
+      std::ostringstream why;
+      why << "the " << which << " image is too small to register: " << size[0] << " x " << size[1] << " x " << size[2]
+          << " voxels, " << double(size[i]) * image.GetSpacing()[i] << " mm along axis " << i << "; rigid registration needs "
+          << minimumMm << " mm along each axis (" << minimumVoxels << " voxels of its coarsest " << coarsestMm << " mm level)";
+      throw InputError(why.str());
+    }
+  }
+}
+
+/// InputError when the foreground of `image` (voxels above `threshold`) spans fewer than
+/// `minimumVoxels` voxels along an axis: a speck, a line or a sheet gives no rotation to find.
+void requireForegroundExtent(const ScalarImage& image, double threshold, const std::string& which, double levelMm,
+                             unsigned minimumVoxels)
+{
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  std::size_t low[3] = {size[0], size[1], size[2]}, high[3] = {0, 0, 0};
+  const float* v = image.GetBufferPointer();
+  std::size_t count = 0;
+  for (std::size_t z = 0, i = 0; z < size[2]; ++z) {
+    for (std::size_t y = 0; y < size[1]; ++y) {
+      for (std::size_t x = 0; x < size[0]; ++x, ++i) {
+        if (v[i] <= threshold) continue;
+        const std::size_t at[3] = {x, y, z};
+        for (int d = 0; d < 3; ++d) {
+          low[d] = std::min(low[d], at[d]);
+          high[d] = std::max(high[d], at[d]);
+        }
+        ++count;
+      }
+    }
+  }
+  if (count == 0) throw InputError("the " + which + " image has no foreground to register");
+  for (int d = 0; d < 3; ++d) {
+    if (high[d] - low[d] + 1 < minimumVoxels) {
+      std::ostringstream why;
+      why << "the " << which << " image's foreground is too small to register: it spans " << high[0] - low[0] + 1 << " x "
+          << high[1] - low[1] + 1 << " x " << high[2] - low[2] + 1 << " voxels of the coarsest " << levelMm
+          << " mm level (" << count << " voxels); rigid registration needs " << minimumVoxels << " along each axis";
+      throw InputError(why.str());
+    }
+  }
+}
+
+/// InputError when every voxel of `image` above `threshold` has one value: mutual information has
+/// no intensity range to bin (ITK's metric then fails with "A spacing of 0 is not allowed"). Checked
+/// on every pyramid level: a uniform block keeps mixed values at its edges only when shrunk.
+void requireVariedForeground(const ScalarImage& image, double threshold, const std::string& which)
+{
+  const float* v = image.GetBufferPointer();
+  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
+  for (std::size_t i = 0, n = image.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+    if (v[i] <= threshold) continue;
+    lowest = std::min(lowest, v[i]);
+    highest = std::max(highest, v[i]);
+  }
+  if (lowest == highest) {
+    std::ostringstream why;
+    why << "the " << which << " image's foreground is uniform (every voxel above the background is " << lowest
+        << "): no feature to register";
+    throw InputError(why.str());
+  }
+}
+
 void setRotationFromEuler(Transform& transform, double a, double b, double c)
 {
   auto euler = itk::Euler3DTransform<double>::New();
@@ -283,6 +365,9 @@ void RigidRegistrationParameters::validate() const
   }
   if (histogramBins < 8 || histogramBins > 256) throw InputError("rigid registration: histogram bins must be 8 to 256");
   if (startAnglesDegrees.empty() || startsOptimized == 0) throw InputError("rigid registration: no start to try");
+  if (minimumVoxelsPerAxis < 2 || minimumValidSamples < 10) {
+    throw InputError("rigid registration: at least 2 voxels per axis and 10 valid samples are needed");
+  }
 }
 
 double rotationDifferenceDegrees(const SpatialTransform& a, const SpatialTransform& b)
@@ -314,6 +399,7 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
                                                               const RigidRegistrationParameters& parameters)
 {
   parameters.validate();
+  requireRegistrableImage(preop, "preoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
   auto prepared = std::make_shared<PreparedRigidMoving>();
   prepared->image = &preop;
   prepared->labels = preopLabels;
@@ -321,12 +407,16 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
   prepared->maskDilationMm = parameters.maskDilationMm;
   for (double spacing : parameters.levelSpacingMm) prepared->levels.push_back(shrinkTo(preop, spacing));
   prepared->threshold = foregroundThreshold(*prepared->levels.front());
+  requireForegroundExtent(*prepared->levels.front(), prepared->threshold, "preoperative", parameters.levelSpacingMm.front(),
+                          parameters.minimumVoxelsPerAxis);
+  for (const ScalarImage::Pointer& level : prepared->levels) requireVariedForeground(*level, prepared->threshold, "preoperative");
   if (preopLabels) prepared->mask = movingMaskFrom(*preopLabels, parameters.maskDilationMm);
   return prepared;
 }
 
-RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
-                                        const RigidRegistrationParameters& parameters)
+namespace {
+RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                                 const RigidRegistrationParameters& parameters)
 {
   parameters.validate();
   RigidRegistrationResult result;
@@ -340,10 +430,14 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
              prepared->maskDilationMm != parameters.maskDilationMm) {
     throw std::invalid_argument("rigid registration: the preoperative side was prepared from other images or settings");
   }
+  requireRegistrableImage(intraop, "intraoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
   std::vector<ScalarImage::Pointer> fixedLevels;
   for (double spacing : parameters.levelSpacingMm) fixedLevels.push_back(shrinkTo(intraop, spacing));
   const std::vector<ScalarImage::Pointer>& movingLevels = prepared->levels;
   const double fixedThreshold = foregroundThreshold(*fixedLevels.front());
+  requireForegroundExtent(*fixedLevels.front(), fixedThreshold, "intraoperative", parameters.levelSpacingMm.front(),
+                          parameters.minimumVoxelsPerAxis);
+  for (const ScalarImage::Pointer& level : fixedLevels) requireVariedForeground(*level, fixedThreshold, "intraoperative");
   const double movingThreshold = prepared->threshold;
   const MaskObject::Pointer mask = prepared->mask;
 
@@ -444,6 +538,7 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
 
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
+      result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
       result.normalizedMutualInformation = normalizedMutualInformation(
         *fixedLevels[level], *movingLevels[level], *points, *transform, mask, parameters.histogramBins, result.overlap);
     }
@@ -455,7 +550,10 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
 
   // Can the result be trusted?
   std::ostringstream why;
-  if (result.overlap < parameters.minimumOverlap) {
+  if (result.validSamples < parameters.minimumValidSamples) {
+    why << "only " << result.validSamples << " samples of the intraoperative foreground land on the preoperative image; "
+        << "mutual information needs at least " << parameters.minimumValidSamples << " to be meaningful";
+  } else if (result.overlap < parameters.minimumOverlap) {
     why << "only " << int(100 * result.overlap) << " % of the intraoperative foreground lands on the preoperative head";
   } else if (result.normalizedMutualInformation < parameters.minimumNormalizedMutualInformation) {
     why << "normalized mutual information " << result.normalizedMutualInformation << " is below "
@@ -483,6 +581,19 @@ RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const Scalar
     }
   }
   return result;
+}
+} // namespace
+
+RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                        const RigidRegistrationParameters& parameters)
+{
+  try {
+    return registerRigidlyUnguarded(intraop, preop, preopLabels, parameters);
+  } catch (const itk::ExceptionObject& e) {
+    // ITK's metric gives up on images it cannot measure (no sample inside the virtual domain, a
+    // zero intensity range): a registration that failed, said in one line.
+    throw MethodError("rigid registration failed on these images: " + oneLine(e.GetDescription()));
+  }
 }
 
 } // namespace brainshift

@@ -50,6 +50,12 @@ struct RigidRegistrationParameters {
   // wrong optimum 9.6 degrees off gave 1.078, gross failures 1.01 to 1.03.
   double minimumNormalizedMutualInformation = 1.12, warningNormalizedMutualInformation = 1.17;
   double warningRotationDegrees = 45.0, maximumRotationDegrees = 90.0;
+  /// Too little to register (InputError): each image, and the intraoperative foreground, must span
+  /// this many voxels of the coarsest level along every axis.
+  unsigned minimumVoxelsPerAxis = 4;
+  /// Too few samples for mutual information to mean anything (untrustworthy): the finest level's
+  /// samples that land inside the preoperative image (and mask) at the result.
+  unsigned minimumValidSamples = 500;
 
   void validate() const; ///< InputError for inconsistent or absurd values
 };
@@ -57,6 +63,7 @@ struct RigidRegistrationParameters {
 struct RigidRegistrationResult {
   SpatialTransform::Pointer intraopToPreop; ///< an itk::VersorRigid3DTransform
   double metricValue = 0;                   ///< Mattes MI at the finest level (negative: better)
+  unsigned validSamples = 0;                ///< of the finest level's samples, those the metric used at the result
   double normalizedMutualInformation = 0;   ///< (H(F) + H(M)) / H(F, M) on the finest samples, 1..2
   double overlap = 0;                       ///< fraction of fixed samples landing in the moving mask
   double rotationDegrees = 0, translationMm = 0; ///< of the result, about the fixed foreground centre
@@ -68,14 +75,16 @@ struct RigidRegistrationResult {
   Warnings warnings;
 };
 
-/// Registers; the images may be anisotropic and on different grids. InputError for images
-/// without foreground; the result says whether it can be trusted.
 /// The preoperative side of the registration, the same for every scan of a case: the moving
 /// image's pyramid, its foreground threshold and the metric's mask from the labels (`labels` may be
 /// null). A session (brainshift watch) prepares it once.
 std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
                                                               const RigidRegistrationParameters& parameters);
 
+/// Registers; the images may be anisotropic and on different grids. InputError for an image that
+/// is constant, smaller than minimumVoxelsPerAxis coarsest voxels along an axis, or without a
+/// foreground that spans as much; the result says whether it can be trusted (too few valid samples,
+/// little overlap, low normalized mutual information, an implausible rotation).
 RigidRegistrationResult registerRigidly(const ScalarImage& intraop, const ScalarImage& preop,
                                         const LabelImage* preopLabels, const RigidRegistrationParameters& parameters);
 

@@ -34,6 +34,10 @@ expect() {
   rm -f "$err"
 }
 
+live_in_session() { # SID: the processes of the session still running (zombies left to their reaper excluded)
+  ps -eo sid=,stat=,pid= | awk -v sid="$1" '$1 == sid && $2 !~ /^Z/ { print $3 }'
+}
+
 no_temporaries() { # FOLDER...: no partial file of a run left
   local left
   left=$(find "$@" -name '.tmp-*' 2>/dev/null)
@@ -241,6 +245,174 @@ OneLineDiagnostics)
   expect 2 "$out/truncated.h5" -- "$brainshift" evaluate --transform "$out/truncated.h5" --landmarks "$case_dir/landmarks.csv"
   expect 2 "$out/folder-as-image" -- "$brainshift" rigid --preop-image "$out/folder-as-image" --intraop-image "$I" \
     --output-dir "$out/rigid"
+  ;;
+
+StageCaseIdentity)
+  # A stage alone checks the case as register does: a folder holding another case's results is
+  # refused (exit 2, nothing written) unless --overwrite.
+  out=$work/reliability-identity
+  rm -rf "$out" && mkdir -p "$out/inputs"
+  # Another case: the small case's labels with 20 voxels of parenchyma turned to CSF.
+  python3 - "$L" "$out/inputs/other-labels.nii.gz" <<'PY'
+import gzip, struct, sys
+data = bytearray(gzip.open(sys.argv[1]).read())
+offset = int(struct.unpack_from('<f', data, 108)[0])
+changed = 0
+for i in range(offset, len(data)):
+    if data[i] == 2 and changed < 20:
+        data[i] = 3
+        changed += 1
+gzip.open(sys.argv[2], 'wb').write(bytes(data))
+PY
+  "$brainshift" mesh --preop-labels "$L" --output-dir "$out/mesh" >/dev/null || fail "mesh exited $?"
+  grep -q '"preop_labels"' "$out/mesh/report.json" || fail "mesh recorded no case_inputs in report.json"
+  before=$(sha256sum "$out/mesh/mesh.vtu" "$out/mesh/report.json")
+  expect 2 "$out/mesh: holds the results of another case" -- "$brainshift" mesh --preop-labels "$out/inputs/other-labels.nii.gz" \
+    --output-dir "$out/mesh"
+  [ "$before" = "$(sha256sum "$out/mesh/mesh.vtu" "$out/mesh/report.json")" ] || fail "a refused stage changed the folder"
+  # The same case's other stages are welcome (the labels agree; the image is new to the report).
+  "$brainshift" rigid --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/mesh" >/dev/null ||
+    fail "rigid of the same case into its folder exited $?"
+  grep -q '"preop_image"' "$out/mesh/report.json" || fail "rigid did not add its image to case_inputs"
+  # register's folder (the demo's) refuses a stage of another case too.
+  mkdir -p "$out/register" && cp "$demo/report.json" "$demo/mesh.vtu" "$out/register/"
+  expect 2 "holds the results of another case" -- "$brainshift" classify --preop-labels "$out/inputs/other-labels.nii.gz" \
+    --intraop-image "$I" --output-dir "$out/register"
+  # --overwrite replaces them, and the report starts afresh with the new case.
+  "$brainshift" mesh --preop-labels "$out/inputs/other-labels.nii.gz" --output-dir "$out/mesh" --overwrite >/dev/null ||
+    fail "mesh --overwrite exited $?"
+  grep -q "other-labels.nii.gz" "$out/mesh/report.json" || fail "--overwrite did not record the new case"
+  grep -q '"preop_image"' "$out/mesh/report.json" && fail "--overwrite kept the other case's entries in report.json"
+  no_temporaries "$out"
+  ;;
+
+RigidDegenerateImages)
+  # Images too small or featureless to register: bad input (exit 2), one line, no transform.
+  out=$work/reliability-degenerate
+  rm -rf "$out" && mkdir -p "$out/inputs"
+  python3 - "$I" "$out/inputs" <<'PY'
+import gzip, struct, sys
+data = bytearray(gzip.open(sys.argv[1]).read())
+offset = int(struct.unpack_from('<f', data, 108)[0])
+dims = struct.unpack_from('<8h', data, 40)
+datatype, bitpix = struct.unpack_from('<hh', data, 70)
+nbytes = bitpix // 8
+header = bytearray(data[:offset])
+# A 4x4x4 image: the header's dimensions, the first 64 voxels.
+tiny = bytearray(header)
+struct.pack_into('<8h', tiny, 40, 3, 4, 4, 4, 1, 1, 1, 1)
+gzip.open(sys.argv[2] + '/tiny.nii.gz', 'wb').write(bytes(tiny + data[offset:offset + 64 * nbytes]))
+# The full grid with zeros but one voxel (its first byte), and a constant image (all bytes equal).
+n = dims[1] * dims[2] * dims[3] * nbytes
+speck = bytearray(n); centre = (n // 2) // nbytes * nbytes
+speck[centre:centre + nbytes] = data[offset + centre:offset + centre + nbytes] if any(data[offset + centre:offset + centre + nbytes]) else b'\x40' * nbytes
+gzip.open(sys.argv[2] + '/speck.nii.gz', 'wb').write(bytes(header + speck))
+gzip.open(sys.argv[2] + '/constant.nii.gz', 'wb').write(bytes(header + b'\x40' * n))
+PY
+  expect 2 "too small to register" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/tiny.nii.gz" --output-dir "$out/tiny"
+  expect 2 "foreground is too small to register" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/speck.nii.gz" \
+    --output-dir "$out/speck"
+  expect 2 "a constant image" -- "$brainshift" rigid --preop-image "$P" --intraop-image "$out/inputs/constant.nii.gz" --output-dir "$out/constant"
+  [ -n "$(find "$out" -name rigid_intraop_to_preop.tfm)" ] && fail "a refused registration wrote a transform"
+  no_temporaries "$out"
+  ;;
+
+SignalDuringWarp)
+  # SIGTERM while warp writes its files: exit 143, one line, no `.tmp-*` left, every file there
+  # whole (the previous one or the new one), and the next run succeeds.
+  out=$work/reliability-signal-warp
+  caught=no
+  for attempt in 1 2 3 4 5; do
+    rm -rf "$out" && mkdir -p "$out/run"
+    find "$demo/" -maxdepth 1 -type f -exec cp {} "$out/run/" \;
+    ln -s "$case_dir" "$out/run/case" # the demo's scene refers to the case's images there
+    "$brainshift" warp --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/run" \
+      >/dev/null 2>"$out/err" &
+    run=$!
+    for _ in $(seq 1 4000); do # until its first partial file (or 0.4 s at the latest: mid-run)
+      [ -n "$(find "$out/run" -name '.tmp-*' 2>/dev/null | head -1)" ] && break
+      kill -0 "$run" 2>/dev/null || break
+      sleep 0.0001
+    done
+    kill -TERM "$run" 2>/dev/null
+    wait "$run"
+    status=$?
+    [ "$status" -eq 0 ] && continue # it had finished: try again
+    caught=yes
+    break
+  done
+  if [ "$caught" = no ]; then
+    fail "warp always finished before SIGTERM reached it"
+  else
+    [ "$status" -eq 143 ] || fail "exit $status after SIGTERM during warp, expected 143 ($(cat "$out/err"))"
+    [ "$(grep -c . "$out/err")" -eq 1 ] && grep -q "stopped by SIGTERM" "$out/err" || fail "stderr: $(cat "$out/err")"
+    no_temporaries "$out/run"
+    for volume in "$out"/run/*.nii.gz; do
+      gzip -t "$volume" 2>/dev/null || fail "$volume is cut short after SIGTERM"
+    done
+    "$brainshift" bench read-scene --scene "$out/run/scene.mrml" >/dev/null 2>&1 || fail "scene.mrml unreadable after SIGTERM"
+    "$brainshift" warp --preop-image "$P" --preop-labels "$L" --intraop-image "$I" --output-dir "$out/run" >/dev/null ||
+      fail "warp after the interrupted one exited $?"
+    no_temporaries "$out/run"
+  fi
+  ;;
+
+SignalDuringWatch)
+  # SIGINT to watch, first while it waits for images, then while a scan's finite element worker
+  # runs: exit 130, one line, nothing of its session left running, no `.tmp-*`, the folder free.
+  out=$work/reliability-signal-watch
+  rm -rf "$out" && mkdir -p "$out/incoming"
+  setsid "$brainshift" watch --preop-image "$P" --preop-labels "$L" --watch-dir "$out/incoming" --poll-seconds 0.2 \
+    --output-dir "$out/session" >"$out/log" 2>"$out/err" &
+  run=$!
+  for _ in $(seq 1 3000); do
+    [ -d "$out/session" ] && break
+    sleep 0.01
+  done
+  sleep 1 # waiting for images
+  kill -INT "$run"
+  wait "$run"
+  status=$?
+  [ "$status" -eq 130 ] || fail "exit $status after SIGINT to a waiting watch, expected 130 ($(cat "$out/err"))"
+  [ "$(grep -c . "$out/err")" -eq 1 ] && grep -q "stopped by SIGINT" "$out/err" || fail "stderr: $(cat "$out/err")"
+  sleep 0.2
+  left=$(live_in_session "$run")
+  [ -z "$left" ] || fail "processes of the waiting watch left: $(ps -o pid,args -p "$(echo $left | tr ' ' ,)")"
+
+  # A scan in progress: the session's served worker is running when SIGINT comes.
+  cp "$I" "$out/incoming/scan1.nii.gz"
+  setsid "$brainshift" watch --preop-image "$P" --preop-labels "$L" --watch-dir "$out/incoming" --poll-seconds 0.2 \
+    --output-dir "$out/session" --overwrite --solver-options "-pc_type none -ksp_rtol 1e-10" >"$out/log" 2>"$out/err" &
+  run=$!
+  worker=""
+  for _ in $(seq 1 6000); do
+    worker=$(pgrep -P "$run" | head -1)
+    [ -n "$worker" ] && break
+    kill -0 "$run" 2>/dev/null || break
+    sleep 0.01
+  done
+  if [ -z "$worker" ]; then
+    fail "the watch session's worker never started ($(cat "$out/err"))"
+  else
+    job_folder=$(tr '\0' '\n' < "/proc/$worker/cmdline" | grep -m1 'job.bsfe' | xargs -r dirname)
+    sleep 0.3
+    kill -INT "$run"
+    wait "$run"
+    status=$?
+    [ "$status" -eq 130 ] || fail "exit $status after SIGINT during a scan, expected 130 ($(cat "$out/err"))"
+    [ "$(grep -c . "$out/err")" -eq 1 ] && grep -q "stopped by SIGINT" "$out/err" || fail "stderr: $(cat "$out/err")"
+    sleep 0.2
+    left=$(live_in_session "$run")
+    [ -z "$left" ] || fail "processes of the watch session left: $(ps -o pid,args -p "$(echo $left | tr ' ' ,)")"
+    [ -n "$job_folder" ] && [ -e "$job_folder" ] && fail "the worker's temporary folder $job_folder was left"
+  fi
+  no_temporaries "$out/session"
+  # The folder is free again: a new session may claim it.
+  rm -f "$out/incoming/scan1.nii.gz"
+  timeout --preserve-status -s INT 3 "$brainshift" watch --preop-image "$P" --preop-labels "$L" --watch-dir "$out/incoming" \
+    --output-dir "$out/session" --overwrite >/dev/null 2>"$out/err"
+  status=$?
+  [ "$status" -eq 130 ] || fail "a new session in the folder exited $status, expected 130 at its SIGINT ($(cat "$out/err"))"
   ;;
 
 *)

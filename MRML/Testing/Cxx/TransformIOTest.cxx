@@ -96,5 +96,11 @@ int TransformIOTest(int, char*[])
     std::ofstream(table) << "a,b,c\n1,2,3\n";
     BS_CHECK_THROWS(readTransform(table), InputError, table.string());
     BS_CHECK_THROWS(readTransform(folder / "missing.h5"), InputError, (folder / "missing.h5").string());
+    // A garbled transform line (found by the fuzz run of issue 18): ITK's text parser threw
+    // std::out_of_range, an internal error; it is bad input naming the file.
+    const fs::path garbled = folder / "garbled.tfm";
+    std::ofstream(garbled) << "#Insight Transfoile V1.0\n#Transform 0\nTransform: VersorRigid3DTransform_double_3_3\n"
+                              "Transform: VersorRigid3DTrble_3_3\nParameters: 0 0 0 1 2 3\nFixedParameters: 0 0 0\n";
+    BS_CHECK_THROWS(readTransform(garbled), InputError, garbled.string() + ": cannot read the transform");
   });
 }

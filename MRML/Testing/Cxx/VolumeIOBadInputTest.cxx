@@ -106,6 +106,28 @@ int VolumeIOBadInputTest(int, char*[])
     checkRefused([&] { readLabelVolume(negative); }, negative, "-1");
     BS_CHECK(readScalarVolume(negative)->GetPixel({{1, 1, 1}}) == -1.0f); // a fine scalar volume
 
+    // Geometry that is not a medical image's: NaN or infinite numbers in the NIfTI header (ITK's reader
+    // aborted the process on them, found by the fuzz run of issue 18), voxels of 5 m.
+    const auto patched = [&](const char* name, std::size_t offset, float value, short sformCode) {
+      const fs::path path = folder / name;
+      writeScalarVolume(smallImage(5.0f), path);
+      std::fstream file(path, std::ios::in | std::ios::out | std::ios::binary);
+      file.seekp(std::streamoff(offset));
+      file.write(reinterpret_cast<const char*>(&value), sizeof value);
+      file.seekp(254);
+      file.write(reinterpret_cast<const char*>(&sformCode), sizeof sformCode);
+      return path;
+    };
+    const fs::path infiniteSform = patched("inf-sform.nii", 280, std::numeric_limits<float>::infinity(), 1);
+    checkRefused([&] { readScalarVolume(infiniteSform); }, infiniteSform, "sform holds NaN or infinite numbers");
+    const fs::path nanPixdim = patched("nan-pixdim.nii", 84, std::numeric_limits<float>::quiet_NaN(), 0);
+    checkRefused([&] { readScalarVolume(nanPixdim); }, nanPixdim, "pixdim");
+    const fs::path huge = folder / "huge-voxels.nrrd";
+    image = smallImage(1.0f);
+    image->SetSpacing(ScalarImage::SpacingType(5000.0));
+    writeScalarVolume(image, huge);
+    checkRefused([&] { readScalarVolume(huge); }, huge, "not those of a medical image");
+
     // DICOM: a series with a missing middle slice, and a folder without DICOM.
     const fs::path gap = folder / "dicom-gap";
     testing::writeDicomSeries(smallImage(7.0f), gap, 2);
