@@ -233,6 +233,18 @@ struct ScanResult {
   bool registered = false;
 };
 
+/// The trust assessment's verdict on a scan's non-rigid update ("trusted", "doubtful", "rejected":
+/// the rigid result stands), or "not assessed" when the update did not get that far.
+std::string trustOf(const fs::path& scanFolder)
+{
+  try {
+    const nlohmann::json report = nlohmann::json::parse(readTextFile(scanFolder / "report.json"));
+    if (report.contains("trust") && report["trust"].contains("nonrigid")) return report["trust"]["nonrigid"].get<std::string>();
+  } catch (const std::exception&) {
+  }
+  return "not assessed";
+}
+
 /// Registers one scan into run.outputDir as `register --previous` would.
 ScanResult registerScan(const RunOptions& run, const Configuration& configuration, SerialScanSession& session, unsigned number)
 {
@@ -253,11 +265,15 @@ ScanResult registerScan(const RunOptions& run, const Configuration& configuratio
     nlohmann::json stages = nlohmann::json::object();
     for (const auto& [stage, values] : report.document()["stages"].items()) stages[stage] = values.value("wall_seconds", 0.0);
     result.entry["stage_seconds"] = stages;
+    result.entry["trust"] = trustOf(run.outputDir);
     result.registered = true;
-    std::printf("== scan %u registered in %.2f s\n", number, seconds);
+    std::printf("== scan %u registered in %.2f s; the non-rigid update is %s\n", number, seconds,
+                result.entry["trust"].get<std::string>().c_str());
   } catch (const std::exception& e) { // one scan's failure does not end the watch
     result.entry["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     result.entry["outcome"] = std::string("failed: ") + e.what();
+    // A rejected update has left the rigid result in every file: the surgeon must see which it is.
+    result.entry["trust"] = trustOf(run.outputDir);
     std::fprintf(stderr, "brainshift watch: scan %u (%s): %s\n", number, run.intraopImage.string().c_str(), e.what());
   }
   return result;

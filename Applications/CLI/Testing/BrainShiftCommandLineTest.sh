@@ -183,6 +183,11 @@ WatchSession)
     outcome=$(json_value "$out/session/watch.json" "['scans'][$index]['outcome']")
     [ "${outcome:0:${#expected}}" = "$expected" ] || fail "watch.json: scan $((index + 1)) outcome '$outcome', expected '$expected'"
   done
+  # Each scan's trust verdict is in watch.json (the broken scan's update never got assessed).
+  for entry in "0 trusted" "1 not assessed" "2 trusted"; do
+    trust=$(json_value "$out/session/watch.json" "['scans'][${entry%% *}]['trust']")
+    [ "$trust" = "${entry#* }" ] || fail "watch.json: scan $((${entry%% *} + 1)) trust '$trust', expected '${entry#* }'"
+  done
   for scan in scan-01 scan-03; do
     for file in intraop_to_preop.h5 displacement_intraop_to_preop.nrrd warped_preop_image.nii.gz warped_fmri.nii.gz scene.mrml; do
       [ -s "$out/session/$scan/$file" ] || fail "$scan lacks $file"
