@@ -10,29 +10,10 @@ brainshift=$2
 work=$3
 demo=$work/demo
 case_dir=$demo/case
-failures=0
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
-fail() { echo "FAILED: $*" >&2; failures=$((failures + 1)); }
-
-# expect STATUS STDERR_FRAGMENT -- command...: the exit status, exactly one line on stderr when the
-# status is not 0, and the fragment in it.
-expect() {
-  local status=$1 fragment=$2
-  shift 3
-  local err
-  err=$(mktemp)
-  "$@" >/dev/null 2>"$err"
-  local got=$?
-  if [ "$got" -ne "$status" ]; then
-    fail "exit $got, expected $status: $* (stderr: $(cat "$err"))"
-  elif [ "$status" -ne 0 ] && [ "$(grep -c . "$err")" -ne 1 ]; then
-    fail "stderr is not one line: $* -> $(cat "$err")"
-  elif [ -n "$fragment" ] && ! grep -qF -- "$fragment" "$err"; then
-    fail "stderr lacks '$fragment': $* -> $(cat "$err")"
-  fi
-  rm -f "$err"
-}
+# shellcheck source=CommandLineTestSupport.sh
+source "$(dirname "${BASH_SOURCE[0]}")/CommandLineTestSupport.sh"
 
 live_in_session() { # SID: the processes of the session still running (zombies left to their reaper excluded)
   ps -eo sid=,stat=,pid= | awk -v sid="$1" '$1 == sid && $2 !~ /^Z/ { print $3 }'

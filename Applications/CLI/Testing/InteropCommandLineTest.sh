@@ -11,27 +11,8 @@ tool=$3
 work=$4
 demo=$work/demo
 here=$work/interop-$case_name
-failures=0
-fail() { echo "FAILED: $*" >&2; failures=$((failures + 1)); }
-
-# expect STATUS FRAGMENT -- command...: the exit status, and for a failure one line on stderr
-# holding FRAGMENT.
-expect() {
-  local status=$1 fragment=$2
-  shift 3
-  local err
-  err=$(mktemp)
-  "$@" >/dev/null 2>"$err"
-  local got=$?
-  if [ "$got" -ne "$status" ]; then
-    fail "exit $got, expected $status: $* (stderr: $(cat "$err"))"
-  elif [ "$status" -ne 0 ] && [ "$(grep -c . "$err")" -ne 1 ]; then
-    fail "stderr is not one line: $* -> $(cat "$err")"
-  elif [ -n "$fragment" ] && ! grep -qF -- "$fragment" "$err"; then
-    fail "stderr lacks '$fragment': $* -> $(cat "$err")"
-  fi
-  rm -f "$err"
-}
+# shellcheck source=CommandLineTestSupport.sh
+source "$(dirname "${BASH_SOURCE[0]}")/CommandLineTestSupport.sh"
 
 # start_tool MODE ARGS...: runs the test tool in the background; waits for its port in $here/port.
 start_tool() {
