@@ -19,7 +19,7 @@ packages=(
   libcli11-dev nlohmann-json3-dev libgtest-dev
   # data: the Colin27 T1 template of the built-in case; python3 for the command-line tests
   mricron-data python3
-  # an independent finite element solver for the cross-check test
+  # an independent finite element solver: the cross-check test and the built-in case's finite element truth
   calculix-ccx
   # the trust benchmark's damaged segmentations (Testing/Benchmarks/trust)
   python3-numpy python3-scipy
