@@ -10,6 +10,7 @@
 #include "RunCommands.h"
 #include "TransformIO.h"
 #include "VolumeIO.h"
+#include "WarpedPriorRefinement.h"
 
 #include <vtkDataArray.h>
 #include <vtkPointData.h>
@@ -80,39 +81,6 @@ struct WarpedPrior {
 /// corrections lie next to the tissue it did move, within about the shift itself (the reach).
 constexpr double MovedMm = 1.0;
 
-/// Within `reachMm` of where the non-rigid part of the mapping y -> x = y + d(y) exceeds `limitMm`.
-MaskImage::Pointer movedByMoreThan(const DisplacementFieldImage& field, const SpatialTransform& rigid, double limitMm, double reachMm)
-{
-  const AffineParameters r = affineParametersOf(&rigid);
-  auto moved = MaskImage::New();
-  moved->CopyInformation(&field);
-  moved->SetRegions(field.GetLargestPossibleRegion());
-  moved->Allocate();
-  const auto size = field.GetLargestPossibleRegion().GetSize();
-  const DisplacementVector* d = field.GetBufferPointer();
-  unsigned char* m = moved->GetBufferPointer();
-  std::size_t i = 0;
-  for (std::size_t z = 0; z < size[2]; ++z) {
-    for (std::size_t y = 0; y < size[1]; ++y) {
-      for (std::size_t x = 0; x < size[0]; ++x, ++i) {
-        PhysicalPoint p;
-        field.TransformIndexToPhysicalPoint({{itk::IndexValueType(x), itk::IndexValueType(y), itk::IndexValueType(z)}}, p);
-        double squared = 0;
-        for (int a = 0; a < 3; ++a) {
-          const double rigidA = r.translation[a] + r.matrix[a][0] * p[0] + r.matrix[a][1] * p[1] + r.matrix[a][2] * p[2];
-          const double e = p[a] + d[i][a] - rigidA;
-          squared += e * e;
-        }
-        m[i] = squared > limitMm * limitMm;
-      }
-    }
-  }
-  const ScalarImage::Pointer distance = signedDistanceMm(moved);
-  const float* toMoved = distance->GetBufferPointer();
-  for (std::size_t v = 0; v < i; ++v) m[v] = toMoved[v] <= float(reachMm);
-  return moved;
-}
-
 /// The preoperative labels warped onto the intraoperative grid by the solved mesh.
 WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
 {
@@ -126,7 +94,7 @@ WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   const DeformationField deformation = intraopToPreopField(mesh, *rigid, ImageGeometry::of(&context.intraopImage("refine")),
                                                            DeformationFieldParameters{}, meshFile.string());
-  return {warpLabelVolume(context.preopLabels("refine"), *deformation.field), reachMm > 0 ? movedByMoreThan(*deformation.field, *rigid, MovedMm, reachMm) : nullptr};
+  return {warpLabelVolume(context.preopLabels("refine"), *deformation.field), reachMm > 0 ? regionMovedBySolve(*deformation.field, *rigid, MovedMm, reachMm) : nullptr};
 }
 
 } // namespace
@@ -195,9 +163,10 @@ void runRefineStage(RunContext& context)
                                        {"settled", settled || maximumPasses == 0},
                                        {"per_pass", passes}});
   if (!settled && maximumPasses > 0) {
-    context.report().addWarning("refine: the brain boundary still moved " +
-                                std::to_string(passes.back()["mean_change_mm"].get<double>()).substr(0, 4) +
-                                " mm mean in the last of " + std::to_string(maximumPasses) + " passes");
+    char warning[160];
+    std::snprintf(warning, sizeof(warning), "refine: the brain boundary still moved %.2f mm mean in the last of %u passes",
+                  passes.back()["mean_change_mm"].get<double>(), maximumPasses);
+    context.report().addWarning(warning);
   }
 }
 

@@ -23,6 +23,7 @@
 #include "TissueClassificationLogic.h"
 #include "TransformIO.h"
 #include "VolumeIO.h"
+#include "WarpedPriorRefinement.h"
 
 #include <cstdio>
 #include <future>
@@ -140,12 +141,7 @@ void runClassifyStage(RunContext& context)
   }
   if (prototypesFile) prototypes = readPrototypes(*prototypesFile);
   const Configuration& configuration = context.configuration();
-  TissueClassificationParameters parameters;
-  parameters.k = configuration.classificationK;
-  parameters.saturationMm = configuration.classificationSaturationMm;
-  parameters.biasCorrection = configuration.classificationBiasCorrection;
-  parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
-  parameters.tumourResection = tumourResectionFromString(configuration.classificationTumourResected);
+  TissueClassificationParameters parameters = classificationParametersFrom(configuration);
   if (!context.options().preopImage.empty()) {
     parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
   }
@@ -160,18 +156,11 @@ void runClassifyStage(RunContext& context)
   const TissueClassificationResult result =
     prior ? classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters)
           : classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"), *rigid, prototypes, parameters);
-  LabelImage::Pointer labels = result.labels;
-  std::size_t relabelled = 0;
-  if (prior && context.movedByPrior() && context.anchorLabels()) {
-    const unsigned char* moved = context.movedByPrior()->GetBufferPointer();
-    const LabelPixel* anchor = context.anchorLabels()->GetBufferPointer();
-    LabelPixel* out = labels->GetBufferPointer();
-    for (std::size_t i = 0, n = labels->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
-      if (!moved[i]) out[i] = anchor[i];
-      else relabelled += out[i] != anchor[i];
-    }
-  }
-  writeLabelVolume(labels, context.output("intraop_labels.nii.gz"));
+  // refine: the first classification stays where the solve moved nothing.
+  const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
+                                   ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
+                                   : 0;
+  writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
   // Recorded for the next scan of the same case (intraoperative scanner frame).
   writePrototypes(result.prototypes, context.output("classification_prototypes.json"));
   nlohmann::json perClass = nlohmann::json::object();

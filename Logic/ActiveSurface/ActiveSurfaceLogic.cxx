@@ -629,23 +629,20 @@ SinkingDirectionMatch matchAlongSinkingDirection(const Eigen::MatrixXd& rest, co
     // The crossing of the zero level along from + t d nearest to the closest-point fit's t.
     const double hint = (x - from).dot(d);
     const double reach = std::abs(hint) + p.directionalSearchMm;
-    double best = std::numeric_limits<double>::infinity(), bestT = 0;
+    double best = std::numeric_limits<double>::infinity();
     double previousT = -reach, previous = field.value(toIndex(from + previousT * d));
     for (double t = -reach + step; t <= reach; t += step) {
       const double value = field.value(toIndex(from + t * d));
       if ((previous <= 0) != (value <= 0)) {
         const double crossing = previousT + step * previous / (previous - value);
-        if (std::abs(crossing - hint) < std::abs(best - hint)) {
-          best = crossing;
-          bestT = crossing;
-        }
+        if (std::abs(crossing - hint) < std::abs(best - hint)) best = crossing;
       }
       previous = value;
       previousT = t;
     }
-    if (!std::isfinite(best) || std::abs(bestT - hint) > p.directionalSearchMm) continue;
+    if (!std::isfinite(best) || std::abs(best - hint) > p.directionalSearchMm) continue;
     match.targets.used[i] = true;
-    match.targets.points[i] = from + bestT * d;
+    match.targets.points[i] = from + best * d;
     ++match.matched;
   }
   return match;
@@ -658,9 +655,12 @@ SinkingDirectionMatch matchAlongSinkingDirection(const Eigen::MatrixXd& rest, co
 /// left them: pinned to the segmentation's boundary they follow its errors (on a sphere whose cap
 /// the segmentation eroded by 4 mm, the cap's error grew from 0.88 to 1.25 mm). Nodes left free, or
 /// placed by the image term, or where the segmentation did not show the expected contrast, stay.
-void snapOntoBoundary(FitOutcome& fit, const PointTargets& targets, const std::vector<unsigned char>& freeReason,
-                      const ActiveSurfaceParameters& p)
+/// Returns the nodes kept at the membrane's position because snapping turned a triangle over.
+std::size_t snapOntoBoundary(FitOutcome& fit, const PointTargets& targets, const Eigen::MatrixXd& rest,
+                             const std::vector<std::array<vtkIdType, 3>>& triangles,
+                             const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p)
 {
+  const Eigen::MatrixXd membranePositions = fit.positions;
   for (Eigen::Index i = 0; i < fit.positions.rows(); ++i) {
     const std::size_t node = std::size_t(i);
     // Only where the segmentation showed the expected contrast: a boundary the image doubts is no
@@ -668,6 +668,28 @@ void snapOntoBoundary(FitOutcome& fit, const PointTargets& targets, const std::v
     if (freeReason[node] != 0 || fit.imageUsed[node] || fit.residuals[node] > p.unmatchedResidualMm || fit.plausible[node] == 0) continue;
     if (!targets.used.empty() && targets.used[node]) fit.positions.row(i) = targets.points[node].transpose();
   }
+  // Where this turns a triangle over (two neighbours matched to points of a rough boundary far
+  // apart), its corners keep the membrane's positions; again, until none does.
+  const std::size_t n = std::size_t(rest.rows());
+  std::vector<Vec> from(n), to(n);
+  for (std::size_t i = 0; i < n; ++i) from[i] = rest.row(Eigen::Index(i)).transpose();
+  std::size_t unsnapped = 0;
+  for (int round = 0; round < 5; ++round) {
+    for (std::size_t i = 0; i < n; ++i) to[i] = fit.positions.row(Eigen::Index(i)).transpose();
+    std::size_t reverted = 0;
+    for (const auto& t : triangles) {
+      if (triangleNormal(from, t).dot(triangleNormal(to, t)) > 0) continue;
+      for (vtkIdType corner : t) {
+        if (fit.positions.row(corner) != membranePositions.row(corner)) {
+          fit.positions.row(corner) = membranePositions.row(corner);
+          ++reverted;
+        }
+      }
+    }
+    unsnapped += reverted;
+    if (reverted == 0) break;
+  }
+  return unsnapped;
 }
 
 void ActiveSurfaceParameters::validate() const
@@ -932,28 +954,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   result.maxResidualMm = *std::max_element(residuals.begin(), residuals.end());
 
   if (p.snapToBoundary) {
-    const Eigen::MatrixXd membranePositions = fit.positions;
-    snapOntoBoundary(fit, along.targets, freeReason, p);
-    // Where putting nodes on the boundary turns a triangle over (two neighbours matched to points
-    // of a rough boundary far apart), the three keep the membrane's positions; again, until none does.
-    std::vector<Vec> from(n), to(n);
-    for (std::size_t i = 0; i < n; ++i) from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
-    for (int round = 0; round < 5; ++round) {
-      for (std::size_t i = 0; i < n; ++i) to[i] = fit.positions.row(Eigen::Index(i)).transpose();
-      std::size_t reverted = 0;
-      for (const auto& t : topology.triangles) {
-        const bool flipped = triangleNormal(from, t).dot(triangleNormal(to, t)) <= 0;
-        if (!flipped) continue;
-        for (vtkIdType corner : t) {
-          if ((fit.positions.row(corner) - membranePositions.row(corner)).norm() > 0) {
-            fit.positions.row(corner) = membranePositions.row(corner);
-            ++reverted;
-          }
-        }
-      }
-      result.unsnappedNodes += reverted;
-      if (reverted == 0) break;
-    }
+    result.unsnappedNodes = snapOntoBoundary(fit, along.targets, preopBoundary, topology.triangles, freeReason, p);
   }
   const Eigen::MatrixXd u = fit.positions - preopBoundary;
   std::vector<Vec> from(n), to(n);

@@ -1,6 +1,7 @@
 #include "FiniteElementTruth.h"
 
 #include "BrainShiftErrors.h"
+#include "ExternalProgram.h"
 #include "CgalLabelMapMesher.h"
 
 #include <itkImageRegionIteratorWithIndex.h>
@@ -110,25 +111,13 @@ std::string lastLines(const std::string& text, std::size_t count)
   return text.substr(at + 1);
 }
 
-std::string shellQuoted(const std::string& text)
+/// Several lines as one (the command line prints one line per error): line breaks become " | ".
+std::string oneLine(std::string text)
 {
-  std::string quoted = "'";
-  for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
-
-fs::path findOnPath(const std::string& name)
-{
-  const char* path = std::getenv("PATH");
-  if (!path) return {};
-  std::stringstream folders(path);
-  std::string folder;
-  while (std::getline(folders, folder, ':')) {
-    const fs::path candidate = fs::path(folder.empty() ? "." : folder) / name;
-    std::error_code error;
-    if (fs::is_regular_file(candidate, error) && ::access(candidate.c_str(), X_OK) == 0) return candidate;
-  }
-  return {};
+  while (!text.empty() && (text.back() == '\n' || text.back() == '\r')) text.pop_back();
+  std::string joined;
+  for (char c : text) joined += c == '\n' ? std::string(" | ") : std::string(1, c);
+  return joined;
 }
 
 /// The work folder: the caller's (kept), or a fresh temporary one removed when this goes out of scope.
@@ -374,7 +363,7 @@ double runCcx(const fs::path& ccx, const fs::path& folder, const std::string& na
   // ccx exits 0 even on some errors: its own markers decide too.
   if (!exited || code != 0 || text.find("*ERROR") != std::string::npos || text.find("Job finished") == std::string::npos) {
     throw MethodError("finite element truth: ccx failed (exit code " + std::to_string(code) + ") on " + (folder / (name + ".inp")).string() +
-                      "; the end of its output:\n" + lastLines(text, 15));
+                      "; the end of its output: " + oneLine(lastLines(text, 5)));
   }
   return seconds;
 }

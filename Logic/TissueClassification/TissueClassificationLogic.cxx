@@ -1,6 +1,7 @@
 #include "TissueClassificationLogic.h"
 
 #include "AtomicFile.h"
+#include "Configuration.h"
 #include "DistanceMaps.h"
 #include "MarkupsIO.h"
 
@@ -401,6 +402,17 @@ TumourResection tumourResectionFromString(const std::string& text)
     if (toString(d) == text) return d;
   }
   throw InputError("--tumour-resected: '" + text + "' is not one of yes, no, auto");
+}
+
+TissueClassificationParameters classificationParametersFrom(const Configuration& configuration)
+{
+  TissueClassificationParameters parameters;
+  parameters.k = configuration.classificationK;
+  parameters.saturationMm = configuration.classificationSaturationMm;
+  parameters.biasCorrection = configuration.classificationBiasCorrection;
+  parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
+  parameters.tumourResection = tumourResectionFromString(configuration.classificationTumourResected);
+  return parameters;
 }
 
 double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels)

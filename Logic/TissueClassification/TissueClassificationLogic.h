@@ -80,6 +80,11 @@ struct TissueClassificationParameters {
   void validate() const;
 };
 
+struct Configuration;
+/// The classification's parameters from the one configuration (k, saturation, N4, the resection
+/// decision); every front end takes them from here.
+TissueClassificationParameters classificationParametersFrom(const Configuration& configuration);
+
 struct TissueClassificationResult {
   LabelImage::Pointer labels;                ///< on the intraoperative grid, the contract's labels
   std::vector<TissuePrototype> prototypes;   ///< the ones used (record them for the next scan)

@@ -7,6 +7,7 @@
 // positive orientation (p1 - p0) . ((p2 - p0) x (p3 - p0)) > 0 is accepted as is. A negatively
 // oriented tetrahedron is rejected ("*ERROR in e_c3d: nonpositive jacobian", checked with ccx 2.20).
 #include "BrainShiftTestingSupport.h"
+#include "ExternalProgram.h"
 #include "FiniteElementJob.h"
 
 #include <cstdlib>
@@ -22,21 +23,8 @@
 
 namespace brainshift::testing {
 
-/// The first executable `name` in the folders of PATH, or an empty path.
-inline std::filesystem::path findOnPath(const std::string& name)
-{
-  const char* path = std::getenv("PATH");
-  if (!path) return {};
-  std::stringstream folders(path);
-  std::string folder;
-  while (std::getline(folders, folder, ':')) {
-    if (folder.empty()) folder = ".";
-    const std::filesystem::path candidate = std::filesystem::path(folder) / name;
-    std::error_code error;
-    if (std::filesystem::is_regular_file(candidate, error) && ::access(candidate.c_str(), X_OK) == 0) return candidate;
-  }
-  return {};
-}
+using brainshift::findOnPath;
+using brainshift::shellQuoted;
 
 /// Writes `folder`/`name`.inp: nodes and C3D4 elements with 1-based ids, one element set, material
 /// and solid section per material, the imposed displacements of the fixed nodes per dof, one
@@ -74,13 +62,6 @@ inline void writeCalculixInput(const FiniteElementJob& job, const std::filesyste
   }
   inp << "*NODE PRINT, NSET=Nall\nU\n*END STEP\n";
   if (!inp) throw std::runtime_error("cannot write " + (folder / (name + ".inp")).string());
-}
-
-inline std::string shellQuoted(const std::string& text)
-{
-  std::string quoted = "'";
-  for (char c : text) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
 }
 
 /// Runs `ccx -i name` in `folder` (one thread: deterministic, and polite to a shared machine);
