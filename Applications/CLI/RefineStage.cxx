@@ -107,6 +107,14 @@ void runRefineStage(RunContext& context)
   const double tolerance = configuration.classificationRefinementToleranceMm;
   nlohmann::json passes = nlohmann::json::array();
   bool settled = false;
+  for (const auto& [needed, stage] : {std::pair<const char*, const char*>{"rigid_intraop_to_preop.tfm", "rigid"},
+                                      {"intraop_labels.nii.gz", "classify"}, {"mesh.vtu", "mesh"},
+                                      {"brain_surface.vtp", "surface"}}) {
+    std::error_code ec;
+    if (!fs::exists(context.output(needed), ec)) {
+      throw InputError(context.output(needed).string() + ": not found; run `brainshift " + stage + "` (and the stages after it) on this output folder first");
+    }
+  }
   // The first classification (through the rigid prior) stays where the solve moved nothing.
   const LabelImage::Pointer anchor = readLabelVolume(context.output("intraop_labels.nii.gz"));
   // What the first pass did once for the whole scan stays said in its stages' entries.

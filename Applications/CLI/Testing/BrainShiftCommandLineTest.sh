@@ -611,6 +611,10 @@ HardScenario)
   float_check "$hard/report.json" "['stages']['refine']['passes']" "== 1"
   float_check "$hard/report.json" "['stages']['refine']['per_pass'][0]['mean_change_mm']" ">= 0"
   grep -q "warped by refine pass 1" "$hard/report.json" || fail "refine did not classify with the warped prior"
+  mkdir -p "$work/refine-empty"
+  expect 2 "rigid_intraop_to_preop.tfm: not found; run \`brainshift rigid\`" -- "$brainshift" refine \
+    --preop-image "$hard/case/preop_image.nii.gz" --preop-labels "$hard/case/preop_labels.nii.gz" \
+    --intraop-image "$hard/case/intraop_image.nii.gz" --output-dir "$work/refine-empty"
   [ "$(json_value "$hard/case/case.json" "['parameters']['gap']")" = "fluid-and-air" ] || fail "the scenario's gap is not fluid and air"
   ;;
 
