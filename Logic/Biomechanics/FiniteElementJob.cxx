@@ -1,5 +1,6 @@
 #include "FiniteElementJob.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -12,8 +13,10 @@ namespace brainshift {
 namespace fs = std::filesystem;
 
 namespace {
-constexpr char JobMagic[8] = {'B', 'S', 'F', 'E', 'J', 'O', 'B', '1'};
-constexpr char ResultMagic[8] = {'B', 'S', 'F', 'E', 'R', 'E', 'S', '1'};
+// Version 2: soft constraints and their rejection after the options; their outcome in the result.
+constexpr char JobMagic[8] = {'B', 'S', 'F', 'E', 'J', 'O', 'B', '2'};
+constexpr char ResultMagic[8] = {'B', 'S', 'F', 'E', 'R', 'E', 'S', '2'};
+constexpr std::size_t SoftConstraintValues = 4 + 3 + 6; // weights, target, stiffness
 
 class Writer {
 public:
@@ -185,6 +188,36 @@ void FiniteElementJob::validate() const
   for (double d : fixedDisplacements) {
     if (!std::isfinite(d)) fail("a boundary displacement is not finite");
   }
+  validateSoftConstraints(tetrahedronCount());
+}
+
+void FiniteElementJob::validateSoftConstraints(std::size_t tetrahedra) const
+{
+  auto fail = [](std::size_t i, const std::string& message) {
+    throw std::invalid_argument("soft constraint " + std::to_string(i) + ": " + message);
+  };
+  for (std::size_t i = 0; i < softConstraints.size(); ++i) {
+    const SoftConstraint& c = softConstraints[i];
+    if (c.tetrahedron < 0 || std::size_t(c.tetrahedron) >= tetrahedra) fail(i, "its tetrahedron does not exist");
+    double sum = 0;
+    for (double w : c.weights) {
+      if (!std::isfinite(w) || w < -1e-6 || w > 1 + 1e-6) fail(i, "a barycentric weight outside [0, 1]");
+      sum += w;
+    }
+    if (std::abs(sum - 1) > 1e-6) fail(i, "its barycentric weights do not sum to 1");
+    for (double t : c.target) {
+      if (!std::isfinite(t)) fail(i, "its target displacement is not finite");
+    }
+    for (double s : c.stiffness) {
+      if (!std::isfinite(s)) fail(i, "its stiffness is not finite");
+    }
+    if (c.stiffness[0] < 0 || c.stiffness[3] < 0 || c.stiffness[5] < 0) fail(i, "its stiffness has a negative diagonal");
+  }
+  const SoftConstraintRejection& r = rejection;
+  if (r.rounds < 0 || r.rounds > 100) throw std::invalid_argument("soft constraint rejection: rounds must be 0 to 100");
+  if (!(r.fractionPerRound >= 0 && r.fractionPerRound <= 1)) throw std::invalid_argument("soft constraint rejection: the fraction per round must be in [0, 1]");
+  if (!(r.outlierFactor >= 0) || !std::isfinite(r.outlierFactor)) throw std::invalid_argument("soft constraint rejection: the outlier factor must be finite and >= 0");
+  if (!(r.floorMm >= 0) || !std::isfinite(r.floorMm)) throw std::invalid_argument("soft constraint rejection: the floor must be finite and >= 0 mm");
 }
 
 void writeFiniteElementJob(const FiniteElementJob& job, const fs::path& path)
@@ -203,6 +236,22 @@ void writeFiniteElementJob(const FiniteElementJob& job, const fs::path& path)
   w.vector(job.fixedNodes);
   w.vector(job.fixedDisplacements);
   w.string(job.solverOptions);
+  std::vector<std::int32_t> tetrahedra;
+  std::vector<double> values;
+  tetrahedra.reserve(job.softConstraints.size());
+  values.reserve(SoftConstraintValues * job.softConstraints.size());
+  for (const SoftConstraint& c : job.softConstraints) {
+    tetrahedra.push_back(c.tetrahedron);
+    values.insert(values.end(), c.weights.begin(), c.weights.end());
+    values.insert(values.end(), c.target.begin(), c.target.end());
+    values.insert(values.end(), c.stiffness.begin(), c.stiffness.end());
+  }
+  w.vector(tetrahedra);
+  w.vector(values);
+  w.value(job.rejection.rounds);
+  w.value(job.rejection.fractionPerRound);
+  w.value(job.rejection.outlierFactor);
+  w.value(job.rejection.floorMm);
   w.commit();
 }
 
@@ -219,6 +268,24 @@ FiniteElementJob readFiniteElementJob(const fs::path& path)
   job.fixedNodes = r.vector<std::int32_t>();
   job.fixedDisplacements = r.vector<double>();
   job.solverOptions = r.string();
+  const auto tetrahedra = r.vector<std::int32_t>();
+  const auto values = r.vector<double>();
+  if (values.size() != SoftConstraintValues * tetrahedra.size()) {
+    throw std::runtime_error(path.string() + ": corrupt (soft constraints of the wrong size)");
+  }
+  job.softConstraints.resize(tetrahedra.size());
+  for (std::size_t i = 0; i < tetrahedra.size(); ++i) {
+    SoftConstraint& c = job.softConstraints[i];
+    const double* v = values.data() + SoftConstraintValues * i;
+    c.tetrahedron = tetrahedra[i];
+    std::copy(v, v + 4, c.weights.begin());
+    std::copy(v + 4, v + 7, c.target.begin());
+    std::copy(v + 7, v + 13, c.stiffness.begin());
+  }
+  job.rejection.rounds = r.value<int>();
+  job.rejection.fractionPerRound = r.value<double>();
+  job.rejection.outlierFactor = r.value<double>();
+  job.rejection.floorMm = r.value<double>();
   return job;
 }
 
@@ -238,6 +305,10 @@ void writeFiniteElementResult(const FiniteElementResult& result, const fs::path&
   w.string(result.solver);
   w.string(result.partitioner);
   w.vector(result.tetrahedraPerRank);
+  w.vector(result.softConstraintKept);
+  w.vector(result.softConstraintMisfitMm);
+  w.vector(result.keptPerRound);
+  w.vector(result.rmsMisfitPerRoundMm);
   w.commit();
 }
 
@@ -258,6 +329,10 @@ FiniteElementResult readFiniteElementResult(const fs::path& path)
   result.solver = r.string();
   result.partitioner = r.string();
   result.tetrahedraPerRank = r.vector<std::int64_t>();
+  result.softConstraintKept = r.vector<std::uint8_t>();
+  result.softConstraintMisfitMm = r.vector<double>();
+  result.keptPerRound = r.vector<std::int64_t>();
+  result.rmsMisfitPerRoundMm = r.vector<double>();
   return result;
 }
 

@@ -376,6 +376,24 @@ FiniteElementResult FiniteElementSession::solve(const std::vector<std::int32_t>&
   }
 }
 
+FiniteElementResult FiniteElementSession::solve(const std::vector<std::int32_t>& fixedNodes,
+                                                const std::vector<double>& fixedDisplacements,
+                                                const std::vector<SoftConstraint>& softConstraints,
+                                                const SoftConstraintRejection& rejection)
+{
+  FiniteElementJob check;
+  check.softConstraints = softConstraints;
+  check.rejection = rejection;
+  check.validateSoftConstraints(impl_->prepared.tetrahedronCount());
+  impl_->fixedPart.softConstraints = softConstraints;
+  impl_->fixedPart.rejection = rejection;
+  struct Forget { // the constraints belong to this solve only
+    FiniteElementJob& part;
+    ~Forget() { part.softConstraints.clear(); part.rejection = {}; }
+  } forget{impl_->fixedPart};
+  return solve(fixedNodes, fixedDisplacements);
+}
+
 FiniteElementResult FiniteElementSession::solve(const std::vector<double>& fixedDisplacements)
 {
   if (fixedDisplacements.size() != 3 * impl_->fixedPart.fixedNodes.size()) {

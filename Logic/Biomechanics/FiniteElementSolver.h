@@ -53,6 +53,12 @@ public:
   /// surface nodes): the worker eliminates them anew and sets its preconditioner up again, keeping
   /// the partition and the assembled matrix. Later solves are for these nodes.
   FiniteElementResult solve(const std::vector<std::int32_t>& fixedNodes, const std::vector<double>& fixedDisplacements);
+  /// One solve with soft constraints (matches of the image inside the brain) beside the fixed
+  /// nodes, their worst rejected in rounds as `rejection` says; the operator changes with them, so
+  /// the worker sets its preconditioner (or factorisation) up again for each round. Later solves
+  /// without constraints go back to the prepared operator.
+  FiniteElementResult solve(const std::vector<std::int32_t>& fixedNodes, const std::vector<double>& fixedDisplacements,
+                            const std::vector<SoftConstraint>& softConstraints, const SoftConstraintRejection& rejection);
   /// The job the worker was prepared with (mesh, materials, options), to check a later job against.
   const FiniteElementJob& preparedJob() const;
 

@@ -362,8 +362,64 @@ public:
     KSPDestroy(&ksp_);
     VecDestroy(&x_);
     VecDestroy(&b_);
+    VecDestroy(&softRightHandSide_);
+    MatDestroy(&constrained_);
     MatDestroy(&assembled_);
     MatDestroy(&A_);
+  }
+
+  /// The soft constraints marked active join the operator (H^T W H, within the pattern: a
+  /// constraint couples the nodes of one tetrahedron) and the right-hand side (H^T W target); the
+  /// fixed dofs are eliminated anew and the solver set up again. No constraint and none before:
+  /// nothing to do beyond a change of fixed nodes.
+  void constrain(const std::vector<SoftConstraint>& constraints, const std::vector<char>& active,
+                 const std::vector<std::int32_t>& fixedNodes)
+  {
+    const bool any = std::find(active.begin(), active.end(), char(1)) != active.end();
+    if (!any && !softActive_) {
+      if (fixedNodes != fixedNodes_) refix(fixedNodes);
+      return;
+    }
+    const double clock = MPI_Wtime();
+    if (!constrained_) {
+      check(MatDuplicate(assembled_, MAT_COPY_VALUES, &constrained_), "MatDuplicate");
+      check(VecDuplicate(b_, &softRightHandSide_), "VecDuplicate");
+    } else {
+      check(MatCopy(assembled_, constrained_, SAME_NONZERO_PATTERN), "MatCopy");
+    }
+    check(VecSet(softRightHandSide_, 0.0), "VecSet");
+    for (std::size_t i = 0; i < constraints.size(); ++i) {
+      if (!active[i]) continue;
+      const SoftConstraint& c = constraints[i];
+      PetscInt blocks[4];
+      for (int k = 0; k < 4; ++k) blocks[k] = numbering_.newOfOld[std::size_t(job_.tetrahedra[4 * std::size_t(c.tetrahedron) + k])];
+      if (!mine(blocks[0])) continue; // assembled by the owner of the first node, as the tetrahedron
+      const double W[3][3] = {{c.stiffness[0], c.stiffness[1], c.stiffness[2]},
+                              {c.stiffness[1], c.stiffness[3], c.stiffness[4]},
+                              {c.stiffness[2], c.stiffness[4], c.stiffness[5]}};
+      double block[144], rhs[12];
+      for (int a = 0; a < 4; ++a) {
+        for (int r = 0; r < 3; ++r) {
+          rhs[3 * a + r] = c.weights[a] * (W[r][0] * c.target[0] + W[r][1] * c.target[1] + W[r][2] * c.target[2]);
+          for (int b = 0; b < 4; ++b) {
+            for (int q = 0; q < 3; ++q) block[(3 * a + r) * 12 + 3 * b + q] = c.weights[a] * c.weights[b] * W[r][q];
+          }
+        }
+      }
+      check(MatSetValuesBlocked(constrained_, 4, blocks, 4, blocks, block, ADD_VALUES), "MatSetValuesBlocked");
+      check(VecSetValuesBlocked(softRightHandSide_, 4, blocks, rhs, ADD_VALUES), "VecSetValuesBlocked");
+    }
+    check(MatAssemblyBegin(constrained_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+    check(MatAssemblyEnd(constrained_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    check(VecAssemblyBegin(softRightHandSide_), "VecAssemblyBegin");
+    check(VecAssemblyEnd(softRightHandSide_), "VecAssemblyEnd");
+    softActive_ = any;
+    check(MatCopy(softActive_ ? constrained_ : assembled_, A_, SAME_NONZERO_PATTERN), "MatCopy");
+    eliminate(fixedNodes);
+    check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
+    check(KSPSetUp(ksp_), "KSPSetUp");
+    check(KSPSetUpOnBlocks(ksp_), "KSPSetUpOnBlocks");
+    result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
   }
 
   /// Another set of fixed nodes on the same mesh (a later scan imposes other nodes): the
@@ -372,7 +428,7 @@ public:
   void refix(const std::vector<std::int32_t>& fixedNodes)
   {
     const double clock = MPI_Wtime();
-    check(MatCopy(assembled_, A_, SAME_NONZERO_PATTERN), "MatCopy");
+    check(MatCopy(softActive_ ? constrained_ : assembled_, A_, SAME_NONZERO_PATTERN), "MatCopy");
     eliminate(fixedNodes);
     check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
     check(KSPSetUp(ksp_), "KSPSetUp");
@@ -394,8 +450,9 @@ public:
     for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
     check(VecAssemblyBegin(x_), "VecAssemblyBegin");
     check(VecAssemblyEnd(x_), "VecAssemblyEnd");
-    check(MatMult(assembled_, x_, b_), "MatMult");
+    check(MatMult(softActive_ ? constrained_ : assembled_, x_, b_), "MatMult");
     check(VecScale(b_, -1.0), "VecScale");
+    if (softActive_) check(VecAXPY(b_, 1.0, softRightHandSide_), "VecAXPY");
     for (const auto& [row, index] : fixedRows_) check(VecSetValue(b_, row, values[index], INSERT_VALUES), "VecSetValue");
     check(VecAssemblyBegin(b_), "VecAssemblyBegin");
     check(VecAssemblyEnd(b_), "VecAssemblyEnd");
@@ -527,11 +584,114 @@ private:
   Numbering numbering_;
   FiniteElementResult result_;
   Mat A_ = nullptr, assembled_ = nullptr;
+  Mat constrained_ = nullptr;            ///< assembled_ + H^T W H of the active soft constraints
+  Vec softRightHandSide_ = nullptr;      ///< H^T W target of the active soft constraints
+  bool softActive_ = false;
   Vec x_ = nullptr, b_ = nullptr;
   KSP ksp_ = nullptr;
   std::vector<std::pair<PetscInt, std::size_t>> fixedRows_; ///< owned fixed dof, index into the values
   std::vector<std::int32_t> fixedNodes_;
 };
+
+/// The misfit of each soft constraint under a solution, in mm along the directions it constrains:
+/// sqrt(r^T W r / lambda_max(W)), r = u(p) - target (|r| for an isotropic W).
+std::vector<double> softConstraintMisfits(const FiniteElementJob& mesh, const std::vector<SoftConstraint>& constraints,
+                                          const std::vector<double>& displacements)
+{
+  std::vector<double> misfits(constraints.size(), 0.0);
+  for (std::size_t i = 0; i < constraints.size(); ++i) {
+    const SoftConstraint& c = constraints[i];
+    double r[3] = {-c.target[0], -c.target[1], -c.target[2]};
+    for (int k = 0; k < 4; ++k) {
+      const std::size_t node = std::size_t(mesh.tetrahedra[4 * std::size_t(c.tetrahedron) + k]);
+      for (int d = 0; d < 3; ++d) r[d] += c.weights[k] * displacements[3 * node + std::size_t(d)];
+    }
+    const double W[3][3] = {{c.stiffness[0], c.stiffness[1], c.stiffness[2]},
+                            {c.stiffness[1], c.stiffness[3], c.stiffness[4]},
+                            {c.stiffness[2], c.stiffness[4], c.stiffness[5]}};
+    double v[3] = {1, 1, 1}, largest = 0; // the largest eigenvalue by power iteration (W is 3x3, PSD)
+    for (int iteration = 0; iteration < 30; ++iteration) {
+      double w[3];
+      for (int a = 0; a < 3; ++a) w[a] = W[a][0] * v[0] + W[a][1] * v[1] + W[a][2] * v[2];
+      largest = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+      if (!(largest > 0)) break;
+      for (int a = 0; a < 3; ++a) v[a] = w[a] / largest;
+    }
+    double rWr = 0;
+    for (int a = 0; a < 3; ++a) rWr += r[a] * (W[a][0] * r[0] + W[a][1] * r[1] + W[a][2] * r[2]);
+    misfits[i] = largest > 0 ? std::sqrt(std::max(0.0, rWr / largest)) : std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+  }
+  return misfits;
+}
+
+/// One round of the robust approximation: the active constraints whose misfit exceeds both the
+/// floor and the median plus `outlierFactor` robust standard deviations lose their activity, the
+/// worst first, at most `fractionPerRound` of the active ones. Returns how many went.
+std::size_t rejectOutliers(const std::vector<double>& misfits, std::vector<char>& active, const SoftConstraintRejection& rejection)
+{
+  std::vector<double> values;
+  for (std::size_t i = 0; i < misfits.size(); ++i) if (active[i]) values.push_back(misfits[i]);
+  if (values.size() < 4) return 0;
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  const double middle = median(values);
+  std::vector<double> deviations;
+  for (double v : values) deviations.push_back(std::abs(v - middle));
+  const double threshold = std::max(rejection.floorMm, middle + rejection.outlierFactor * 1.4826 * median(deviations));
+  std::vector<std::size_t> outliers;
+  for (std::size_t i = 0; i < misfits.size(); ++i) if (active[i] && misfits[i] > threshold) outliers.push_back(i);
+  std::sort(outliers.begin(), outliers.end(), [&misfits](std::size_t a, std::size_t b) { return misfits[a] > misfits[b]; });
+  const std::size_t limit = std::size_t(std::floor(rejection.fractionPerRound * double(values.size())));
+  if (outliers.size() > limit) outliers.resize(limit);
+  for (std::size_t i : outliers) active[i] = 0;
+  return outliers.size();
+}
+
+/// Solves with the boundary conditions and soft constraints of `values` on the prepared mesh: the
+/// first solve with every constraint, then rounds of rejection of the worst (Clatz et al. 2005),
+/// until a round rejects none or the rounds are spent. Rank 0's result carries the outcome.
+FiniteElementResult solveWithSoftConstraints(PreparedProblem& problem, const FiniteElementJob& mesh, const FiniteElementJob& values, int rank)
+{
+  const std::vector<SoftConstraint>& constraints = values.softConstraints;
+  std::vector<char> active(constraints.size(), 1);
+  std::vector<std::int64_t> keptPerRound;
+  std::vector<double> rmsPerRound;
+  double setupSeconds = 0, solveSeconds = 0;
+  for (int round = 0;; ++round) {
+    problem.constrain(constraints, active, values.fixedNodes);
+    FiniteElementResult result = problem.solveFor(values.fixedDisplacements);
+    setupSeconds += result.setupSeconds;
+    solveSeconds += result.solveSeconds;
+    int finished = 1;
+    std::vector<double> misfits;
+    if (rank == 0 && !constraints.empty()) {
+      misfits = softConstraintMisfits(mesh, constraints, result.displacements);
+      double sum = 0;
+      std::int64_t kept = 0;
+      for (std::size_t i = 0; i < misfits.size(); ++i) {
+        if (active[i]) { sum += misfits[i] * misfits[i]; ++kept; }
+      }
+      keptPerRound.push_back(kept);
+      rmsPerRound.push_back(kept ? std::sqrt(sum / double(kept)) : 0.0);
+      finished = round >= values.rejection.rounds || rejectOutliers(misfits, active, values.rejection) == 0;
+    }
+    MPI_Bcast(&finished, 1, MPI_INT, 0, PETSC_COMM_WORLD);
+    if (finished) {
+      if (rank == 0 && !constraints.empty()) {
+        result.softConstraintKept.assign(active.begin(), active.end());
+        result.softConstraintMisfitMm = misfits;
+        result.keptPerRound = keptPerRound;
+        result.rmsMisfitPerRoundMm = rmsPerRound;
+      }
+      result.setupSeconds = setupSeconds;
+      result.solveSeconds = solveSeconds;
+      return result;
+    }
+    MPI_Bcast(active.data(), int(active.size()), MPI_CHAR, 0, PETSC_COMM_WORLD);
+  }
+}
 
 /// Serves solves: "solve VALUES RESULT" (VALUES: a job-format file of the fixed nodes and their
 /// displacements; other fixed nodes than the last solve's are eliminated anew first) and "quit",
@@ -570,8 +730,12 @@ void serve(const FiniteElementJob& job, int rank, int size)
           throw WorkerFailure(2, std::string(valuesFile) + ": fixed node " + std::to_string(node) + " is not a node of the mesh");
         }
       }
-      if (values.fixedNodes != problem.fixedNodes()) problem.refix(values.fixedNodes);
-      const FiniteElementResult result = problem.solveFor(values.fixedDisplacements);
+      try {
+        values.validateSoftConstraints(job.tetrahedronCount());
+      } catch (const std::invalid_argument& e) {
+        throw WorkerFailure(2, std::string(valuesFile) + ": " + e.what());
+      }
+      const FiniteElementResult result = solveWithSoftConstraints(problem, job, values, rank);
       if (rank == 0) {
         writeFiniteElementResult(result, resultFile);
         std::printf("solved\n");
@@ -613,7 +777,7 @@ int main(int argc, char** argv)
       serve(job, rank, size);
     } else {
       PreparedProblem problem(job, rank, size, false);
-      const FiniteElementResult result = problem.solveFor(job.fixedDisplacements);
+      const FiniteElementResult result = solveWithSoftConstraints(problem, job, job, rank);
       problem.requireEveryOptionRead(false);
       if (rank == 0) writeFiniteElementResult(result, argv[2]);
     }
