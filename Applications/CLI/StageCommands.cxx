@@ -55,7 +55,7 @@ StageFlags flagsOf(const std::string& stage)
   if (stage == "classify") return {PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage, false, false};
   if (stage == "mesh") return {PreopLabels, PreopLabels, false, true};
   if (stage == "surface") return {PreopLabels | IntraopImage, PreopLabels | IntraopImage, false, false};
-  if (stage == "simulate") return {0, 0, true, false};
+  if (stage == "simulate") return {0, PreopImage | PreopLabels | IntraopImage, true, false}; // the images for block matching
   if (stage == "refine") return {PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage, true, false};
   return {PreopImage | PreopLabels | IntraopImage, PreopImage | PreopLabels | IntraopImage | Overlays, false, false};
 }

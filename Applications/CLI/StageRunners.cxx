@@ -16,6 +16,7 @@
 #include "BiomechanicalModel.h"
 #include "BrainShiftErrors.h"
 #include "FiniteElementSolver.h"
+#include "ImageMatchingSolve.h"
 #include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
@@ -249,11 +250,28 @@ void runSimulateStage(RunContext& context)
   };
   bool served = false, prepared = false;
   FiniteElementResult result;
-  if (SerialScanSession* session = context.session()) {
+  SerialScanSession* session = context.session();
+  if (session) {
     result = solveInSession(*session, job, options, prepared);
     served = true;
   } else {
     result = solveWithWorker(job, options);
+  }
+  const FiniteElementResult surfaceOnly = result;
+  nlohmann::json blockMatching = {{"enabled", configuration.blockMatching.enabled}};
+  if (configuration.blockMatching.enabled) {
+    if (const auto why = imageMatchingUnavailable(context)) {
+      blockMatching["used"] = false;
+      blockMatching["reason"] = *why;
+      context.report().addWarning("simulate: block matching did not run (" + *why + "); the solve is the surface's alone");
+    } else {
+      const ConstrainedSolve solve = [&](const FiniteElementJob& constrained) {
+        if (session) return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
+                                                   constrained.rejection);
+        return solveWithWorker(constrained, options);
+      };
+      result = solveWithImageMatches(context, mesh, job, surfaceOnly, solve, blockMatching);
+    }
   }
   attachDisplacements(mesh, result);
   writeModel(mesh, meshFile);
@@ -270,7 +288,8 @@ void runSimulateStage(RunContext& context)
                                          {"solver", result.solver},
                                          {"partitioner", result.partitioner},
                                          {"tetrahedra_per_rank", result.tetrahedraPerRank},
-                                         {"imposed_nodes", job.fixedNodes.size()}});
+                                         {"imposed_nodes", job.fixedNodes.size()},
+                                         {"block_matching", blockMatching}});
   std::printf("  simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
               static_cast<long long>(result.equations), result.ranks, result.iterations, result.relativeResidual,
               result.assemblySeconds, result.setupSeconds, result.solveSeconds);

@@ -49,7 +49,7 @@ Configuration Configuration::load(const fs::path& path)
   }
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
-  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface"}, file);
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface", "block_matching"}, file);
   if (document.contains("materials")) {
     const json& materials = document["materials"];
     if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
@@ -180,6 +180,26 @@ Configuration Configuration::load(const fs::path& path)
         throw InputError(file + ": surface.max_iterations must be a whole number >= 1");
       }
       configuration.surfaceMaximumIterations = c["max_iterations"].get<unsigned>();
+    }
+  }
+  if (document.contains("block_matching")) {
+    const json& c = document["block_matching"];
+    if (!c.is_object()) throw InputError(file + ": \"block_matching\" must be an object");
+    Configuration::BlockMatching& b = configuration.blockMatching;
+    const std::vector<std::pair<const char*, double*>> numbers{
+      {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
+      {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
+      {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
+      {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
+    std::set<std::string> keys{"enabled"};
+    for (const auto& [key, target] : numbers) keys.insert(key);
+    requireKnownKeys(c, keys, file + ": block_matching");
+    if (c.contains("enabled")) {
+      if (!c["enabled"].is_boolean()) throw InputError(file + ": block_matching.enabled must be true or false");
+      b.enabled = c["enabled"].get<bool>();
+    }
+    for (const auto& [key, target] : numbers) {
+      if (c.contains(key)) *target = number(c[key], file + ": block_matching." + key);
     }
   }
   if (document.contains("ranks")) {
@@ -314,6 +334,31 @@ void Configuration::validate(const std::string& source) const
     throw InputError(source + ": surface max_iterations " + std::to_string(surfaceMaximumIterations) + " is outside 1 to 100000");
   }
   if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
+  validateBlockMatching(source);
+}
+
+void Configuration::validateBlockMatching(const std::string& source) const
+{
+  const BlockMatching& b = blockMatching;
+  auto within = [&source](const char* key, double value, double low, double high, bool whole = false) {
+    if (!std::isfinite(value) || value < low || value > high || (whole && value != std::floor(value))) {
+      std::ostringstream message;
+      message << source << ": block_matching." << key << " " << value << " is outside " << low << " to " << high
+              << (whole ? " (a whole number)" : "");
+      throw InputError(message.str());
+    }
+  };
+  within("block_half_size_mm", b.blockHalfSizeMm, 1, 20);
+  within("block_spacing_mm", b.blockSpacingMm, 1, 50);
+  within("selected_share", b.selectedShare, 0.01, 1);
+  within("search_radius_mm", b.searchRadiusMm, 1, 30);
+  within("minimum_similarity", b.minimumSimilarity, -1, 1);
+  within("maximum_blocks", b.maximumBlocks, 1, 1e6, true);
+  within("stiffness_n_per_mm", b.stiffnessNPerMm, 0, 100);
+  within("rejection_rounds", b.rejectionRounds, 0, 100, true);
+  within("rejection_fraction", b.rejectionFraction, 0, 1);
+  within("outlier_factor", b.outlierFactor, 0, 100);
+  within("rejection_floor_mm", b.rejectionFloorMm, 0, 100);
 }
 
 } // namespace brainshift

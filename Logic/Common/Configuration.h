@@ -65,6 +65,15 @@ struct Configuration {
   /// matched nodes put on the boundary at the end (ActiveSurfaceLogic.h).
   bool surfaceMatchAlongSinkingDirection = true;
   bool surfaceSnapToBoundary = false;
+  /// Block matching inside the brain (Logic/BlockMatching) and its matches as soft constraints of
+  /// the solve, rejected in rounds (FiniteElementJob.h): "block_matching" in the file.
+  struct BlockMatching {
+    bool enabled = true;
+    double blockHalfSizeMm = 4.0, blockSpacingMm = 5.0, selectedShare = 0.5, searchRadiusMm = 6.0, minimumSimilarity = 0.5;
+    double maximumBlocks = 1500;
+    double stiffnessNPerMm = 0.01;  ///< of a match of correlation 1 along the directions its structure pins down
+    double rejectionRounds = 5, rejectionFraction = 0.1, outlierFactor = 2.5, rejectionFloorMm = 1.0;
+  } blockMatching;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a
@@ -73,6 +82,7 @@ struct Configuration {
 
   /// Checks the values; `source` names where they came from in the error message.
   void validate(const std::string& source) const;
+  void validateBlockMatching(const std::string& source) const;
 };
 
 } // namespace brainshift

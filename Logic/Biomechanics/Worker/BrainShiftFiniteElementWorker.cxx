@@ -439,13 +439,19 @@ public:
 
   const std::vector<std::int32_t>& fixedNodes() const { return fixedNodes_; }
 
-  /// Solves for one set of imposed values (3 per fixed node, in the job's order).
-  FiniteElementResult solveFor(const std::vector<double>& values)
+  /// Solves for one set of imposed values (3 per fixed node, in the job's order). `warmStart`: an
+  /// iterative solver starts from the last solution (a round of rejection changes it little).
+  FiniteElementResult solveFor(const std::vector<double>& values, bool warmStart = false)
   {
     FiniteElementResult result = result_;
     const double clock = MPI_Wtime();
     progress(rank_, "solve", 0.0);
     // x: the imposed values on the fixed dofs, 0 elsewhere; b = -A0 x, then the values on the fixed rows.
+    Vec start = nullptr;
+    if (warmStart) {
+      check(VecDuplicate(x_, &start), "VecDuplicate");
+      check(VecCopy(x_, start), "VecCopy");
+    }
     check(VecSet(x_, 0.0), "VecSet");
     for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
     check(VecAssemblyBegin(x_), "VecAssemblyBegin");
@@ -456,6 +462,13 @@ public:
     for (const auto& [row, index] : fixedRows_) check(VecSetValue(b_, row, values[index], INSERT_VALUES), "VecSetValue");
     check(VecAssemblyBegin(b_), "VecAssemblyBegin");
     check(VecAssemblyEnd(b_), "VecAssemblyEnd");
+    if (start) { // the last solution, its fixed dofs the imposed values
+      check(VecCopy(start, x_), "VecCopy");
+      VecDestroy(&start);
+      for (const auto& [row, index] : fixedRows_) check(VecSetValue(x_, row, values[index], INSERT_VALUES), "VecSetValue");
+      check(VecAssemblyBegin(x_), "VecAssemblyBegin");
+      check(VecAssemblyEnd(x_), "VecAssemblyEnd");
+    }
     check(KSPSolve(ksp_, b_, x_), "KSPSolve");
     result.solveSeconds = maxOverRanks(MPI_Wtime() - clock);
     KSPConvergedReason reason;
@@ -659,11 +672,13 @@ FiniteElementResult solveWithSoftConstraints(PreparedProblem& problem, const Fin
   std::vector<std::int64_t> keptPerRound;
   std::vector<double> rmsPerRound;
   double setupSeconds = 0, solveSeconds = 0;
+  int iterations = 0;
   for (int round = 0;; ++round) {
     problem.constrain(constraints, active, values.fixedNodes);
-    FiniteElementResult result = problem.solveFor(values.fixedDisplacements);
+    FiniteElementResult result = problem.solveFor(values.fixedDisplacements, round > 0);
     setupSeconds += result.setupSeconds;
     solveSeconds += result.solveSeconds;
+    iterations += result.iterations;
     int finished = 1;
     std::vector<double> misfits;
     if (rank == 0 && !constraints.empty()) {
@@ -687,6 +702,7 @@ FiniteElementResult solveWithSoftConstraints(PreparedProblem& problem, const Fin
       }
       result.setupSeconds = setupSeconds;
       result.solveSeconds = solveSeconds;
+      result.iterations = iterations; // of every solve
       return result;
     }
     MPI_Bcast(active.data(), int(active.size()), MPI_CHAR, 0, PETSC_COMM_WORLD);

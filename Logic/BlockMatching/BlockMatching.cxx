@@ -1,0 +1,484 @@
+#include "BlockMatching.h"
+
+#include "DistanceMaps.h"
+
+#include <itkIdentityTransform.h>
+#include <itkLinearInterpolateImageFunction.h>
+#include <itkNearestNeighborInterpolateImageFunction.h>
+#include <itkResampleImageFilter.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+namespace brainshift {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+void requireSensible(const BlockMatchingParameters& p)
+{
+  auto positive = [](double v) { return std::isfinite(v) && v > 0; };
+  if (!positive(p.blockHalfSizeMm) || p.blockHalfSizeMm > 20) throw std::invalid_argument("block matching: the block half-size must be in (0, 20] mm");
+  if (!positive(p.blockSpacingMm) || p.blockSpacingMm > 50) throw std::invalid_argument("block matching: the block spacing must be in (0, 50] mm");
+  if (!(p.selectedShare > 0 && p.selectedShare <= 1)) throw std::invalid_argument("block matching: the selected share must be in (0, 1]");
+  if (!positive(p.searchRadiusMm) || p.searchRadiusMm > 30) throw std::invalid_argument("block matching: the search radius must be in (0, 30] mm");
+  if (!positive(p.coarseStepMm)) throw std::invalid_argument("block matching: the coarse step must be positive");
+  if (!(p.minimumDepthMm >= 0) || !std::isfinite(p.minimumDepthMm)) throw std::invalid_argument("block matching: the minimum depth must be >= 0 mm");
+  if (!(p.minimumSimilarity >= -1 && p.minimumSimilarity <= 1)) throw std::invalid_argument("block matching: the minimum similarity must be in [-1, 1]");
+  if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
+  if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
+  if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
+}
+
+/// A volume on the matching grid, x fastest.
+template <class T>
+struct Volume {
+  std::array<int, 3> size{};
+  std::vector<T> values;
+  std::size_t at(int i, int j, int k) const { return std::size_t(i) + std::size_t(size[0]) * (std::size_t(j) + std::size_t(size[1]) * std::size_t(k)); }
+  bool inside(int i, int j, int k, int h) const
+  {
+    return i - h >= 0 && j - h >= 0 && k - h >= 0 && i + h < size[0] && j + h < size[1] && k + h < size[2];
+  }
+};
+
+/// The matching grid: the preoperative image's axes, no finer than the grid spacing, over the
+/// brain and a margin for the search.
+ScalarImage::Pointer matchingGrid(const ScalarImage& preopImage, const LabelImage& preopLabels, const BlockMatchingParameters& p)
+{
+  std::array<double, 3> low{1e30, 1e30, 1e30}, high{-1e30, -1e30, -1e30};
+  const auto region = preopLabels.GetLargestPossibleRegion();
+  const LabelPixel* labels = preopLabels.GetBufferPointer();
+  const auto size = region.GetSize();
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < size[2]; ++k) {
+    for (std::size_t j = 0; j < size[1]; ++j) {
+      for (std::size_t i = 0; i < size[0]; ++i, ++n) {
+        if (std::find(p.brainLabels.begin(), p.brainLabels.end(), int(labels[n])) == p.brainLabels.end()) continue;
+        PhysicalPoint x;
+        preopLabels.TransformIndexToPhysicalPoint({{itk::IndexValueType(i), itk::IndexValueType(j), itk::IndexValueType(k)}}, x);
+        // In the image's own axes: the grid is aligned with them.
+        const auto index = preopImage.TransformPhysicalPointToContinuousIndex<double>(x);
+        for (int d = 0; d < 3; ++d) {
+          low[std::size_t(d)] = std::min(low[std::size_t(d)], index[d]);
+          high[std::size_t(d)] = std::max(high[std::size_t(d)], index[d]);
+        }
+      }
+    }
+  }
+  if (low[0] > high[0]) return nullptr; // no brain
+  const auto spacing = preopImage.GetSpacing();
+  ScalarImage::Pointer grid = ScalarImage::New();
+  ScalarImage::SpacingType gridSpacing;
+  ScalarImage::SizeType gridSize;
+  itk::ContinuousIndex<double, 3> start;
+  const double margin = p.searchRadiusMm + p.blockHalfSizeMm + 25.0; // the prediction may move a block 20 mm and more
+  for (int d = 0; d < 3; ++d) {
+    gridSpacing[d] = std::max(spacing[d], p.gridSpacingMm);
+    const double lowMm = low[std::size_t(d)] * spacing[d] - margin, highMm = high[std::size_t(d)] * spacing[d] + margin;
+    start[d] = lowMm / spacing[d];
+    gridSize[d] = itk::SizeValueType(std::ceil((highMm - lowMm) / gridSpacing[d])) + 1;
+  }
+  PhysicalPoint origin;
+  preopImage.TransformContinuousIndexToPhysicalPoint(start, origin);
+  grid->SetOrigin(origin);
+  grid->SetSpacing(gridSpacing);
+  grid->SetDirection(preopImage.GetDirection());
+  grid->SetRegions(ScalarImage::RegionType(gridSize));
+  return grid;
+}
+
+template <class Image, class Interpolator>
+Volume<typename Image::PixelType> resampledOnto(const Image& image, const ScalarImage& grid, const SpatialTransform* gridToImage)
+{
+  using Filter = itk::ResampleImageFilter<Image, Image, double>;
+  auto filter = Filter::New();
+  filter->SetInput(&image);
+  filter->SetInterpolator(Interpolator::New());
+  if (gridToImage) {
+    filter->SetTransform(gridToImage);
+  } else {
+    filter->SetTransform(itk::IdentityTransform<double, 3>::New());
+  }
+  filter->SetOutputOrigin(grid.GetOrigin());
+  filter->SetOutputSpacing(grid.GetSpacing());
+  filter->SetOutputDirection(grid.GetDirection());
+  filter->SetSize(grid.GetLargestPossibleRegion().GetSize());
+  filter->SetDefaultPixelValue(0);
+  filter->Update();
+  Volume<typename Image::PixelType> volume;
+  const auto size = grid.GetLargestPossibleRegion().GetSize();
+  volume.size = {int(size[0]), int(size[1]), int(size[2])};
+  const auto* buffer = filter->GetOutput()->GetBufferPointer();
+  volume.values.assign(buffer, buffer + filter->GetOutput()->GetLargestPossibleRegion().GetNumberOfPixels());
+  return volume;
+}
+
+/// The intraoperative intensity expected given the preoperative one: the conditional mean over
+/// the voxels that are brain in both label maps, in 64 bins of the preoperative intensity between
+/// its 1st and 99th percentiles (empty bins interpolated). Sets the correlation ratio.
+struct IntensityRemap {
+  double low = 0, width = 1;
+  std::vector<double> table;
+  double operator()(double preop) const
+  {
+    const double position = std::clamp((preop - low) / width - 0.5, 0.0, double(table.size() - 1));
+    const std::size_t bin = std::min(std::size_t(position), table.size() - 2);
+    const double t = position - double(bin);
+    return (1 - t) * table[bin] + t * table[bin + 1];
+  }
+};
+
+IntensityRemap learnRemap(const Volume<float>& preop, const Volume<float>& intraop, const std::vector<char>& brainInBoth,
+                          double& correlationRatio)
+{
+  std::vector<float> values;
+  for (std::size_t n = 0; n < preop.values.size(); ++n) if (brainInBoth[n]) values.push_back(preop.values[n]);
+  IntensityRemap remap;
+  constexpr std::size_t Bins = 64;
+  remap.table.assign(Bins, 0.0);
+  correlationRatio = 0;
+  if (values.size() < 1000) return remap;
+  auto percentile = [&values](double q) {
+    const std::size_t k = std::size_t(q * double(values.size() - 1));
+    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(k), values.end());
+    return double(values[k]);
+  };
+  const double lo = percentile(0.01), hi = percentile(0.99);
+  remap.low = lo;
+  remap.width = std::max(hi - lo, 1e-6) / Bins;
+  std::vector<double> sum(Bins, 0), sumSquares(Bins, 0), count(Bins, 0);
+  double total = 0, totalSquares = 0, totalCount = 0;
+  for (std::size_t n = 0; n < preop.values.size(); ++n) {
+    if (!brainInBoth[n]) continue;
+    const std::size_t bin = std::size_t(std::clamp((preop.values[n] - lo) / remap.width, 0.0, double(Bins - 1)));
+    const double y = intraop.values[n];
+    sum[bin] += y;
+    sumSquares[bin] += y * y;
+    count[bin] += 1;
+    total += y;
+    totalSquares += y * y;
+    totalCount += 1;
+  }
+  double within = 0;
+  for (std::size_t b = 0; b < Bins; ++b) {
+    if (count[b] > 0) within += sumSquares[b] - sum[b] * sum[b] / count[b];
+  }
+  const double variance = totalSquares - total * total / totalCount;
+  correlationRatio = variance > 0 ? 1 - within / variance : 0;
+  // Bins with too few voxels take their neighbours' values.
+  std::vector<std::size_t> filled;
+  for (std::size_t b = 0; b < Bins; ++b) {
+    if (count[b] >= 20) {
+      remap.table[b] = sum[b] / count[b];
+      filled.push_back(b);
+    }
+  }
+  if (filled.empty()) return remap;
+  for (std::size_t b = 0; b < Bins; ++b) {
+    if (count[b] >= 20) continue;
+    const auto next = std::lower_bound(filled.begin(), filled.end(), b);
+    if (next == filled.begin()) remap.table[b] = remap.table[*next];
+    else if (next == filled.end()) remap.table[b] = remap.table[filled.back()];
+    else {
+      const std::size_t a = *(next - 1), c = *next;
+      const double t = double(b - a) / double(c - a);
+      remap.table[b] = (1 - t) * remap.table[a] + t * remap.table[c];
+    }
+  }
+  return remap;
+}
+
+/// A source block: zero-mean values and their norm.
+struct SourceBlock {
+  std::vector<float> values;
+  double norm = 0;
+};
+
+SourceBlock sourceBlock(const Volume<float>& image, int ci, int cj, int ck, int h)
+{
+  SourceBlock block;
+  double sum = 0;
+  for (int k = ck - h; k <= ck + h; ++k)
+    for (int j = cj - h; j <= cj + h; ++j)
+      for (int i = ci - h; i <= ci + h; ++i) {
+        block.values.push_back(image.values[image.at(i, j, k)]);
+        sum += image.values[image.at(i, j, k)];
+      }
+  const double mean = sum / double(block.values.size());
+  double squares = 0;
+  for (float& v : block.values) {
+    v = float(v - mean);
+    squares += double(v) * v;
+  }
+  block.norm = std::sqrt(squares);
+  return block;
+}
+
+/// Normalised cross-correlation of the source block with the target block centred at (i, j, k);
+/// -2 where the target block leaves the volume or is flat.
+double correlation(const SourceBlock& source, const Volume<float>& target, int ci, int cj, int ck, int h)
+{
+  if (!target.inside(ci, cj, ck, h) || source.norm <= 0) return -2;
+  double product = 0, sum = 0, squares = 0;
+  std::size_t n = 0;
+  for (int k = ck - h; k <= ck + h; ++k)
+    for (int j = cj - h; j <= cj + h; ++j) {
+      const float* row = &target.values[target.at(ci - h, j, k)];
+      for (int i = 0; i <= 2 * h; ++i, ++n) {
+        const double b = row[i];
+        product += double(source.values[n]) * b;
+        sum += b;
+        squares += b * b;
+      }
+    }
+  const double targetVariance = squares - sum * sum / double(n);
+  if (targetVariance <= 1e-12) return -2;
+  return product / (source.norm * std::sqrt(targetVariance));
+}
+
+struct GridGeometry {
+  itk::Matrix<double, 3, 3> indexToPhysical; ///< D S
+  itk::Matrix<double, 3, 3> physicalToIndex; ///< S^-1 D^T
+  std::array<double, 3> spacing{};
+};
+
+GridGeometry geometryOf(const ScalarImage& grid)
+{
+  GridGeometry g;
+  itk::Matrix<double, 3, 3> scale;
+  scale.Fill(0);
+  for (int d = 0; d < 3; ++d) {
+    scale(d, d) = grid.GetSpacing()[d];
+    g.spacing[std::size_t(d)] = grid.GetSpacing()[d];
+  }
+  g.indexToPhysical = grid.GetDirection() * scale;
+  g.physicalToIndex = g.indexToPhysical.GetInverse();
+  return g;
+}
+
+/// The normalised gradient structure tensor of the remapped image over the block (physical axes).
+std::array<double, 6> structureTensor(const Volume<float>& image, int ci, int cj, int ck, int h, const GridGeometry& geometry)
+{
+  double G[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+  for (int k = ck - h; k <= ck + h; ++k)
+    for (int j = cj - h; j <= cj + h; ++j)
+      for (int i = ci - h; i <= ci + h; ++i) {
+        const double gi = (image.values[image.at(i + 1, j, k)] - image.values[image.at(i - 1, j, k)]) / (2 * geometry.spacing[0]);
+        const double gj = (image.values[image.at(i, j + 1, k)] - image.values[image.at(i, j - 1, k)]) / (2 * geometry.spacing[1]);
+        const double gk = (image.values[image.at(i, j, k + 1)] - image.values[image.at(i, j, k - 1)]) / (2 * geometry.spacing[2]);
+        // Gradient in physical axes: D g (index axes, already per mm).
+        double g[3];
+        for (int a = 0; a < 3; ++a) {
+          const auto& D = geometry.indexToPhysical;
+          g[a] = (D(a, 0) / geometry.spacing[0]) * gi + (D(a, 1) / geometry.spacing[1]) * gj + (D(a, 2) / geometry.spacing[2]) * gk;
+        }
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b) G[a][b] += g[a] * g[b];
+      }
+  double v[3] = {1, 0.7, 0.4}, largest = 0;
+  for (int iteration = 0; iteration < 40; ++iteration) {
+    double w[3];
+    for (int a = 0; a < 3; ++a) w[a] = G[a][0] * v[0] + G[a][1] * v[1] + G[a][2] * v[2];
+    largest = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    if (!(largest > 0)) return {};
+    for (int a = 0; a < 3; ++a) v[a] = w[a] / largest;
+  }
+  return {G[0][0] / largest, G[0][1] / largest, G[0][2] / largest, G[1][1] / largest, G[1][2] / largest, G[2][2] / largest};
+}
+
+/// What became of one block (whose centre and predicted displacement `match` holds).
+enum class Outcome { Matched, LowSimilarity, OutsideBrain, AtSearchEdge };
+
+struct MatchingContext {
+  const Volume<float>& remappedPreop;
+  const Volume<float>& intraop;
+  const Volume<LabelPixel>& intraopLabels;
+  const GridGeometry& geometry;
+  const BlockMatchingParameters& parameters;
+  int h = 0, radius = 0, coarseStep = 1;
+};
+
+bool isBrain(const std::vector<int>& labels, LabelPixel label) { return std::find(labels.begin(), labels.end(), int(label)) != labels.end(); }
+
+Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, BlockMatch& match)
+{
+  const SourceBlock source = sourceBlock(c.remappedPreop, centre[0], centre[1], centre[2], c.h);
+  std::array<int, 3> start{};
+  for (int a = 0; a < 3; ++a) {
+    double offset = 0;
+    for (int b = 0; b < 3; ++b) offset += c.geometry.physicalToIndex(a, b) * match.predicted[std::size_t(b)];
+    start[std::size_t(a)] = centre[std::size_t(a)] + int(std::lround(offset));
+  }
+  auto score = [&](const std::array<int, 3>& o) {
+    return correlation(source, c.intraop, start[0] + o[0], start[1] + o[1], start[2] + o[2], c.h);
+  };
+  // Coarse pass over the window, then every voxel around the coarse peak.
+  std::array<int, 3> best{0, 0, 0};
+  double bestScore = -3;
+  const int coarseReach = c.radius / c.coarseStep * c.coarseStep;
+  for (int z = -coarseReach; z <= coarseReach; z += c.coarseStep)
+    for (int y = -coarseReach; y <= coarseReach; y += c.coarseStep)
+      for (int x = -coarseReach; x <= coarseReach; x += c.coarseStep) {
+        const double s = score({x, y, z});
+        if (s > bestScore) { bestScore = s; best = {x, y, z}; }
+      }
+  for (int pass = 0; pass < 4; ++pass) { // hill-climb at one voxel until the peak stays
+    const std::array<int, 3> around = best;
+    const int reach = pass == 0 ? c.coarseStep - 1 : 1;
+    for (int z = -reach; z <= reach; ++z)
+      for (int y = -reach; y <= reach; ++y)
+        for (int x = -reach; x <= reach; ++x) {
+          const std::array<int, 3> o{around[0] + x, around[1] + y, around[2] + z};
+          if (std::abs(o[0]) > c.radius || std::abs(o[1]) > c.radius || std::abs(o[2]) > c.radius) continue;
+          const double s = score(o);
+          if (s > bestScore) { bestScore = s; best = o; }
+        }
+    if (best == around && pass > 0) break;
+  }
+  match.similarity = bestScore;
+  if (bestScore < c.parameters.minimumSimilarity) return Outcome::LowSimilarity;
+  if (std::abs(best[0]) >= c.radius || std::abs(best[1]) >= c.radius || std::abs(best[2]) >= c.radius) return Outcome::AtSearchEdge;
+  // Sub-voxel: a parabola through the peak and its two neighbours, per axis.
+  std::array<double, 3> sub{0, 0, 0};
+  double fall = 0;
+  for (int a = 0; a < 3; ++a) {
+    std::array<int, 3> minus = best, plus = best;
+    minus[std::size_t(a)] -= 1;
+    plus[std::size_t(a)] += 1;
+    const double sm = score(minus), sp = score(plus), curvature = sm + sp - 2 * bestScore;
+    fall += (2 * bestScore - sm - sp) / 2;
+    if (curvature < 0) sub[std::size_t(a)] = std::clamp(0.5 * (sm - sp) / curvature, -0.5, 0.5);
+  }
+  match.sharpness = fall / 3;
+  // The matched block must be brain in the scan (not the cavity, the gap or the skull).
+  const std::array<int, 3> at{start[0] + best[0], start[1] + best[1], start[2] + best[2]};
+  std::size_t brain = 0, total = 0;
+  for (int k = at[2] - c.h; k <= at[2] + c.h; ++k)
+    for (int j = at[1] - c.h; j <= at[1] + c.h; ++j)
+      for (int i = at[0] - c.h; i <= at[0] + c.h; ++i, ++total) brain += isBrain(c.parameters.brainLabels, c.intraopLabels.values[c.intraopLabels.at(i, j, k)]);
+  if (double(brain) < c.parameters.minimumBrainShare * double(total)) return Outcome::OutsideBrain;
+  for (int a = 0; a < 3; ++a) {
+    double d = 0;
+    for (int b = 0; b < 3; ++b) d += c.geometry.indexToPhysical(a, b) * (at[std::size_t(b)] - centre[std::size_t(b)] + sub[std::size_t(b)]);
+    match.displacement[std::size_t(a)] = d;
+  }
+  match.structure = structureTensor(c.remappedPreop, centre[0], centre[1], centre[2], c.h, c.geometry);
+  return Outcome::Matched;
+}
+
+} // namespace
+
+BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
+                                const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
+                                const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters)
+{
+  requireSensible(parameters);
+  BlockMatchingResult result;
+  auto clock = Clock::now();
+  const ScalarImage::Pointer grid = matchingGrid(preopImage, preopLabels, parameters);
+  if (!grid) return result;
+  const auto preopToIntraop = rigidIntraopToPreop.GetInverseTransform();
+  if (!preopToIntraop) throw std::invalid_argument("block matching: the rigid transform cannot be inverted");
+  using LinearScalar = itk::LinearInterpolateImageFunction<ScalarImage, double>;
+  using NearestLabel = itk::NearestNeighborInterpolateImageFunction<LabelImage, double>;
+  const Volume<float> preop = resampledOnto<ScalarImage, LinearScalar>(preopImage, *grid, nullptr);
+  const Volume<LabelPixel> preopGridLabels = resampledOnto<LabelImage, NearestLabel>(preopLabels, *grid, nullptr);
+  const Volume<float> intraop = resampledOnto<ScalarImage, LinearScalar>(intraopImage, *grid, preopToIntraop.GetPointer());
+  const Volume<LabelPixel> intraopGridLabels = resampledOnto<LabelImage, NearestLabel>(intraopLabels, *grid, preopToIntraop.GetPointer());
+  const std::size_t voxels = preop.values.size();
+  std::vector<char> preopBrain(voxels), brainInBoth(voxels);
+  for (std::size_t n = 0; n < voxels; ++n) {
+    preopBrain[n] = isBrain(parameters.brainLabels, preopGridLabels.values[n]);
+    brainInBoth[n] = preopBrain[n] && isBrain(parameters.brainLabels, intraopGridLabels.values[n]);
+  }
+  const IntensityRemap remap = learnRemap(preop, intraop, brainInBoth, result.remapCorrelationRatio);
+  Volume<float> remapped = preop;
+  for (float& v : remapped.values) v = float(remap(v));
+  result.remapSeconds = secondsSince(clock);
+
+  // Candidates: lattice centres deep in the brain whose block holds no excluded tissue; the most
+  // structured share of them (variance of the remapped block) is matched.
+  clock = Clock::now();
+  MaskImage::Pointer mask = MaskImage::New();
+  mask->CopyInformation(grid);
+  mask->SetRegions(grid->GetLargestPossibleRegion());
+  mask->Allocate();
+  std::copy(preopBrain.begin(), preopBrain.end(), mask->GetBufferPointer());
+  const ScalarImage::Pointer distance = signedDistanceMm(mask);
+  const float* signedDistance = distance->GetBufferPointer();
+  const GridGeometry geometry = geometryOf(*grid);
+  const double spacing = std::max({geometry.spacing[0], geometry.spacing[1], geometry.spacing[2]});
+  const int h = std::max(1, int(std::lround(parameters.blockHalfSizeMm / spacing)));
+  const int stride = std::max(1, int(std::lround(parameters.blockSpacingMm / spacing)));
+  std::vector<std::pair<double, std::array<int, 3>>> candidates;
+  for (int k = h + 1; k + h + 1 < remapped.size[2]; k += stride)
+    for (int j = h + 1; j + h + 1 < remapped.size[1]; j += stride)
+      for (int i = h + 1; i + h + 1 < remapped.size[0]; i += stride) {
+        if (-signedDistance[remapped.at(i, j, k)] < parameters.minimumDepthMm) continue;
+        bool excluded = false;
+        double sum = 0, squares = 0, n = 0;
+        for (int z = k - h; z <= k + h && !excluded; ++z)
+          for (int y = j - h; y <= j + h && !excluded; ++y)
+            for (int x = i - h; x <= i + h; ++x) {
+              const std::size_t at = remapped.at(x, y, z);
+              if (std::find(parameters.excludedLabels.begin(), parameters.excludedLabels.end(), int(preopGridLabels.values[at])) !=
+                  parameters.excludedLabels.end()) {
+                excluded = true;
+                break;
+              }
+              sum += remapped.values[at];
+              squares += double(remapped.values[at]) * remapped.values[at];
+              n += 1;
+            }
+        if (excluded) continue;
+        candidates.push_back({squares / n - (sum / n) * (sum / n), {i, j, k}});
+      }
+  result.candidates = candidates.size();
+  std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::size_t keep = std::min(parameters.maximumBlocks, std::size_t(std::ceil(parameters.selectedShare * double(candidates.size()))));
+  candidates.resize(std::min(keep, candidates.size()));
+  result.selected = candidates.size();
+  result.selectionSeconds = secondsSince(clock);
+
+  // Matching, the blocks shared between threads.
+  clock = Clock::now();
+  MatchingContext context{remapped, intraop, intraopGridLabels, geometry, parameters};
+  context.h = h;
+  context.radius = std::max(1, int(std::ceil(parameters.searchRadiusMm / spacing)));
+  context.coarseStep = std::max(1, int(std::lround(parameters.coarseStepMm / spacing)));
+  std::vector<BlockMatch> matches(candidates.size());
+  for (std::size_t b = 0; b < candidates.size(); ++b) { // the prediction need not be thread-safe
+    const auto& centre = candidates[b].second;
+    grid->TransformIndexToPhysicalPoint({{centre[0], centre[1], centre[2]}}, matches[b].centre);
+    matches[b].predicted = prediction ? prediction(matches[b].centre) : std::array<double, 3>{0, 0, 0};
+  }
+  std::vector<Outcome> outcomes(candidates.size(), Outcome::LowSimilarity);
+  const unsigned threads = std::max(1u, std::min(2u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> workers;
+  for (unsigned t = 0; t < threads; ++t) {
+    workers.emplace_back([&, t] {
+      for (std::size_t b = t; b < candidates.size(); b += threads) outcomes[b] = matchOne(context, candidates[b].second, matches[b]);
+    });
+  }
+  for (std::thread& w : workers) w.join();
+  for (std::size_t b = 0; b < candidates.size(); ++b) {
+    switch (outcomes[b]) {
+    case Outcome::Matched: result.matches.push_back(matches[b]); break;
+    case Outcome::LowSimilarity: ++result.lowSimilarity; break;
+    case Outcome::OutsideBrain: ++result.outsideBrain; break;
+    case Outcome::AtSearchEdge: ++result.atSearchEdge; break;
+    }
+  }
+  result.matchingSeconds = secondsSince(clock);
+  return result;
+}
+
+} // namespace brainshift

@@ -1,0 +1,78 @@
+#pragma once
+// Block matching inside the brain (after Clatz et al. 2005, "Robust nonrigid registration to
+// capture brain shift from intraoperative MRI"): blocks of the preoperative image where it carries
+// structure, each found again in the intraoperative image brought into the preoperative frame by
+// the rigid transform, starting from where a prediction (the surface-driven solve) puts it.
+//
+// The intraoperative contrast need not be the preoperative one: the preoperative image is first
+// remapped into the intraoperative intensities by the conditional mean of the intraoperative
+// intensity given the preoperative one over the brain (a functional relation learned from this
+// scan: monotonic for T1, inverted for T2, folded for FLAIR), and blocks are compared by normalised
+// cross-correlation with the remapped image.
+//
+// Frames: the model frame is the preoperative physical space (LPS mm). A match says that the
+// tissue at `centre` in the preoperative image lies at `centre + displacement` in the deformed
+// configuration, the frame in which the finite element displacement u(X) is solved.
+#include "ImageTypes.h"
+#include "TransformIO.h"
+
+#include <array>
+#include <cstddef>
+#include <functional>
+#include <vector>
+
+namespace brainshift {
+
+struct BlockMatchingParameters {
+  double blockHalfSizeMm = 4.0;   ///< a block spans 2 h + 1 voxels of the matching grid per axis
+  double blockSpacingMm = 5.0;    ///< candidate block centres on a lattice this far apart
+  double selectedShare = 0.5;     ///< of the candidates, the most structured share is matched
+  std::size_t maximumBlocks = 1500;
+  double searchRadiusMm = 6.0;    ///< around the predicted displacement, per axis
+  double coarseStepMm = 2.0;      ///< the first pass of the search; then 1 voxel, then sub-voxel
+  double minimumDepthMm = 4.0;    ///< block centres at least this deep inside the brain
+  double minimumSimilarity = 0.5; ///< normalised cross-correlation at the peak below this: no match
+  double minimumBrainShare = 0.7; ///< of the matched block's voxels classified brain in the scan
+  double gridSpacingMm = 1.0;     ///< the matching grid: the preoperative grid, no finer than this
+  std::vector<int> brainLabels{2, 3, 4};
+  /// Preoperative labels whose tissue is gone from the scan (the tumour when resected): blocks that
+  /// hold any of them are not matched.
+  std::vector<int> excludedLabels;
+};
+
+struct BlockMatch {
+  PhysicalPoint centre;                ///< preoperative frame (mm)
+  std::array<double, 3> predicted{};   ///< the displacement the search started from (mm)
+  std::array<double, 3> displacement{}; ///< the displacement found (mm)
+  double similarity = 0;               ///< normalised cross-correlation at the peak
+  double sharpness = 0;                ///< mean fall of the correlation one voxel off the peak
+  /// The block's gradient structure tensor (of the remapped image), divided by its largest
+  /// eigenvalue: 1 along the directions the block's structure pins down, 0 along those it does
+  /// not (an edge leaves its tangent free). xx, xy, xz, yy, yz, zz.
+  std::array<double, 6> structure{};
+};
+
+struct BlockMatchingResult {
+  std::vector<BlockMatch> matches;
+  std::size_t candidates = 0;        ///< lattice centres deep enough in the brain
+  std::size_t selected = 0;          ///< the most structured share, matched
+  std::size_t lowSimilarity = 0;     ///< dropped: the peak's correlation below the minimum
+  std::size_t outsideBrain = 0;      ///< dropped: the matched block not brain in the scan
+  std::size_t atSearchEdge = 0;      ///< dropped: the peak on the edge of the search window
+  double remapSeconds = 0, selectionSeconds = 0, matchingSeconds = 0;
+  double remapCorrelationRatio = 0;  ///< eta^2 of the intraoperative given the preoperative intensity
+};
+
+/// The displacement (mm, model frame) a prediction gives at a preoperative point.
+using DisplacementPrediction = std::function<std::array<double, 3>(const PhysicalPoint&)>;
+
+/// Matches blocks of `preopImage` inside the brain of `preopLabels` in `intraopImage`, whose
+/// classification `intraopLabels` (on its grid) says where the brain is in the scan.
+/// `rigidIntraopToPreop` maps intraoperative to preoperative points. `prediction` may be empty (no
+/// displacement predicted). std::invalid_argument for absurd parameters; a brain too small for a
+/// block gives no matches, not an error.
+BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
+                                const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
+                                const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters);
+
+} // namespace brainshift
