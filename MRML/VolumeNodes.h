@@ -30,6 +30,17 @@ struct VolumeDisplay {
     d.upperThreshold = 100.0;
     return d;
   }
+  /// An error estimate in mm over the scan: green (below 1 mm) through red (3 mm and more),
+  /// half transparent.
+  static VolumeDisplay errorEstimateMm()
+  {
+    VolumeDisplay d;
+    d.colorTable = "ColdToHotRainbow";
+    d.window = 3.0;
+    d.level = 1.5;
+    d.opacity = 0.5;
+    return d;
+  }
 };
 
 class ScalarVolumeNode : public Node {

@@ -5,6 +5,7 @@
 #include "ModelIO.h"
 #include "SurfaceDisplacementEvaluation.h"
 #include "LandmarkEvaluation.h"
+#include "UncertaintyEvaluation.h"
 #include "VolumeIO.h"
 #include "RunCommands.h"
 #include "SceneIO.h"
@@ -260,6 +261,23 @@ void addDemoCommand(CLI::App& app)
                     a.meanErrorMm, a.p95ErrorMm, a.meanTrueDisplacementMm, a.maxTrueDisplacementMm, a.movingMeanErrorMm,
                     a.movingMeanTrueDisplacementMm, a.meanResidualMm);
       }
+    }
+    if (fs::exists(out / "displacement_uncertainty_mm.nii.gz", ec) && fs::exists(out / "displacement_intraop_to_preop.nrrd", ec)) {
+      const UncertaintyValidation u =
+        validateUncertainty(*readDisplacementField(out / "displacement_intraop_to_preop.nrrd"), *simulated.intraopToPreop,
+                            *readScalarVolume(out / "displacement_uncertainty_mm.nii.gz"), *simulated.intraopLabels);
+      evaluation["uncertainty"] = {{"voxels", u.voxels},
+                                   {"rank_correlation", u.rankCorrelation},
+                                   {"mean_true_error_mm", u.meanTrueErrorMm},
+                                   {"mean_estimate_mm", u.meanEstimateMm},
+                                   {"share_called_below_1mm", u.shareCalledBelow1Mm},
+                                   {"called_below_1mm_truly_below_1_5mm", u.calledBelow1MmTrulyBelow1_5Mm},
+                                   {"true_error_where_called_above_2mm", u.trueErrorWhereCalledAbove2MmMm},
+                                   {"true_error_file", "true_error_mm.nii.gz"}};
+      writeScalarVolume(u.trueError, out / "true_error_mm.nii.gz");
+      std::printf("confidence map: rank correlation with the true error %.2f over %zu brain voxels; %.0f %% called below 1 mm, "
+                  "%.0f %% of them truly below 1.5 mm\n",
+                  u.rankCorrelation, u.voxels, 100 * u.shareCalledBelow1Mm, 100 * u.calledBelow1MmTrulyBelow1_5Mm);
     }
     writeTextFileAtomically(out / "evaluation.json", evaluation.dump(2) + "\n");
     report.save();

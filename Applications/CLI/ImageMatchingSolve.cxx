@@ -15,6 +15,7 @@
 #include <vtkPolyData.h>
 #include <vtkUnsignedCharArray.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -95,6 +96,55 @@ double rmsMisfit(const FiniteElementJob& job, const std::vector<SoftConstraint>&
   return std::sqrt(sum / double(constraints.size()));
 }
 
+/// The imposed surface nodes that moved at least `softAboveMm` leave the fixed nodes and become
+/// soft constraints (isotropic, `stiffness`) appended to `job`'s: the segmentation's surface is
+/// then evidence beside the matches, and where the two disagree the rejection weighs them. At least
+/// a tenth of the imposed nodes (those that moved least) stay fixed. Returns how many went soft.
+std::size_t softenMovedSurface(FiniteElementJob& job, double softAboveMm, double stiffness)
+{
+  if (softAboveMm <= 0) return 0;
+  std::vector<std::int32_t> tetrahedronOfNode(job.nodeCount(), -1);
+  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
+    for (int k = 0; k < 4; ++k) {
+      std::int32_t& owner = tetrahedronOfNode[std::size_t(job.tetrahedra[4 * t + std::size_t(k)])];
+      if (owner < 0) owner = std::int32_t(t);
+    }
+  }
+  std::vector<std::pair<double, std::size_t>> moved; // |u|, index into the fixed nodes
+  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
+    const double* u = &job.fixedDisplacements[3 * f];
+    moved.push_back({std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]), f});
+  }
+  std::sort(moved.begin(), moved.end());
+  const std::size_t keepFixed = std::max<std::size_t>(1, moved.size() / 10);
+  std::vector<char> soft(job.fixedNodes.size(), 0);
+  std::size_t softened = 0;
+  for (std::size_t i = keepFixed; i < moved.size(); ++i) {
+    if (moved[i].first < softAboveMm) continue;
+    const std::size_t f = moved[i].second;
+    const std::int32_t node = job.fixedNodes[f], t = tetrahedronOfNode[std::size_t(node)];
+    if (t < 0) continue;
+    SoftConstraint c;
+    c.tetrahedron = t;
+    for (int k = 0; k < 4; ++k) c.weights[std::size_t(k)] = job.tetrahedra[4 * std::size_t(t) + std::size_t(k)] == node ? 1.0 : 0.0;
+    c.target = {job.fixedDisplacements[3 * f], job.fixedDisplacements[3 * f + 1], job.fixedDisplacements[3 * f + 2]};
+    c.stiffness = {stiffness, 0, 0, stiffness, 0, stiffness};
+    job.softConstraints.push_back(c);
+    soft[f] = 1;
+    ++softened;
+  }
+  std::vector<std::int32_t> nodes;
+  std::vector<double> values;
+  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
+    if (soft[f]) continue;
+    nodes.push_back(job.fixedNodes[f]);
+    values.insert(values.end(), job.fixedDisplacements.begin() + std::ptrdiff_t(3 * f), job.fixedDisplacements.begin() + std::ptrdiff_t(3 * f + 3));
+  }
+  job.fixedNodes = nodes;
+  job.fixedDisplacements = values;
+  return softened;
+}
+
 } // namespace
 
 std::optional<std::string> imageMatchingUnavailable(RunContext& context)
@@ -111,7 +161,8 @@ std::optional<std::string> imageMatchingUnavailable(RunContext& context)
 }
 
 FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGrid* mesh, const FiniteElementJob& job,
-                                          const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry)
+                                          const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry,
+                                          DisplacementEvidence& evidence)
 {
   Stopwatch clock;
   const Configuration& configuration = context.configuration();
@@ -124,9 +175,17 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   const DisplacementPrediction prediction = [&](const PhysicalPoint& x) {
     return locator.interpolate(surfaceOnly.displacements, x).value_or(std::array<double, 3>{0, 0, 0});
   };
+  BlockMatchingParameters parameters = blockMatchingParametersFrom(configuration, tumourResected);
+  parameters.largestPredictedMm = 0;
+  for (std::size_t i = 0; i + 2 < surfaceOnly.displacements.size(); i += 3) {
+    parameters.largestPredictedMm = std::max(parameters.largestPredictedMm, std::sqrt(std::pow(surfaceOnly.displacements[i], 2) +
+                                                                                       std::pow(surfaceOnly.displacements[i + 1], 2) +
+                                                                                       std::pow(surfaceOnly.displacements[i + 2], 2)));
+  }
+  parameters.largestPredictedMm = std::min(parameters.largestPredictedMm, 200.0);
   const BlockMatchingResult matching =
     matchBlocks(context.preopImage("simulate"), context.preopLabels("simulate"), context.intraopImage("simulate"), *intraopLabels, *rigid,
-                prediction, blockMatchingParametersFrom(configuration, tumourResected));
+                prediction, parameters);
   const ImageMatchConstraints constraints = softConstraintsFromMatches(locator, matching.matches, configuration.blockMatching.stiffnessNPerMm);
   entry = {{"enabled", true},
            {"candidates", matching.candidates},
@@ -151,9 +210,14 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   FiniteElementJob constrained = job;
   constrained.softConstraints = constraints.constraints;
   constrained.rejection = rejectionFrom(configuration);
+  const std::size_t matchConstraints = constrained.softConstraints.size();
+  const std::size_t softSurface = softenMovedSurface(constrained, configuration.blockMatching.surfaceSoftAboveMm,
+                                                     configuration.blockMatching.surfaceStiffnessNPerMm);
   const FiniteElementResult result = solve(constrained);
-  std::size_t kept = 0;
-  for (std::uint8_t k : result.softConstraintKept) kept += k;
+  std::size_t kept = 0, surfaceKept = 0;
+  for (std::size_t i = 0; i < result.softConstraintKept.size(); ++i) (i < matchConstraints ? kept : surfaceKept) += result.softConstraintKept[i];
+  entry["surface_soft_nodes"] = softSurface;
+  entry["surface_soft_kept"] = surfaceKept;
   double change = 0;
   for (std::size_t i = 0; i + 2 < result.displacements.size(); i += 3) {
     change += std::sqrt(std::pow(result.displacements[i] - surfaceOnly.displacements[i], 2) +
@@ -162,7 +226,7 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   }
   entry["used"] = true;
   entry["kept"] = kept;
-  entry["rejected"] = constraints.constraints.size() - kept;
+  entry["rejected"] = matchConstraints - kept;
   entry["solves"] = result.keptPerRound.size();
   entry["kept_per_solve"] = result.keptPerRound;
   entry["rms_misfit_surface_only_mm"] = rmsMisfit(job, constraints.constraints, surfaceOnly.displacements);
@@ -170,6 +234,13 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   entry["mean_node_change_mm"] = change / double(std::max<std::size_t>(1, result.displacements.size() / 3));
   entry["solve_seconds"] = result.setupSeconds + result.solveSeconds;
   writeMatches(matching.matches, constraints, result, context.output("block_matches.vtp"));
+  for (std::size_t c = 0; c < matchConstraints && c < result.softConstraintMisfitMm.size(); ++c) {
+    const PhysicalPoint& x = matching.matches[constraints.matchOfConstraint[c]].centre;
+    const std::array<double, 3> point{x[0], x[1], x[2]};
+    if (result.softConstraintKept[c]) evidence.points.push_back(point);
+    evidence.misfitPoints.push_back(point);
+    evidence.misfitsMm.push_back(result.softConstraintMisfitMm[c]);
+  }
   entry["wall_seconds"] = clock.seconds();
   std::printf("  simulate: %zu of %zu matches kept after %zu solves; misfit %.2f mm (surface alone) -> %.2f mm (kept)\n", kept,
               constraints.constraints.size(), result.keptPerRound.size(), entry["rms_misfit_surface_only_mm"].get<double>(),

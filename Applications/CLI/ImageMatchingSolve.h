@@ -1,5 +1,6 @@
 #pragma once
 // The simulate stage's image-driven second solve (ImageMatchingSolve.cxx).
+#include "DisplacementUncertainty.h"
 #include "RunCommands.h"
 
 #include <nlohmann/json.hpp>
@@ -20,8 +21,10 @@ using ConstrainedSolve = std::function<FiniteElementResult(const FiniteElementJo
 
 /// Blocks matched from the surface-driven solution `surfaceOnly`, then `job` solved again with the
 /// matches as soft constraints. Returns the final solution (the surface-driven one when no block
-/// matched); `entry` becomes report.json's simulate.block_matching. Writes block_matches.vtp.
+/// matched); `entry` becomes report.json's simulate.block_matching. Writes block_matches.vtp. Adds
+/// the kept matches to `evidence` (points) and every match with its misfit (misfit points).
 FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGrid* mesh, const FiniteElementJob& job,
-                                          const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry);
+                                          const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry,
+                                          DisplacementEvidence& evidence);
 
 } // namespace brainshift::cli

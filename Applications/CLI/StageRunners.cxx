@@ -2,6 +2,7 @@
 // files in the output folder, its entry in report.json.
 #include "ActiveSurfaceLogic.h"
 #include "DeformationField.h"
+#include "NodalFieldRasterisation.h"
 #include "NonrigidUpdateTrust.h"
 #include "ModelNode.h"
 #include "SceneIO.h"
@@ -31,6 +32,7 @@
 #include <numeric>
 #include <optional>
 
+#include <vtkDoubleArray.h>
 #include <vtkPointData.h>
 
 namespace brainshift::cli {
@@ -231,6 +233,24 @@ FiniteElementResult solveInSession(SerialScanSession& session, FiniteElementJob 
 }
 } // namespace
 
+namespace {
+/// The point array "DisplacementUncertainty" (mm) of the solved mesh: the confidence of the
+/// displacement from the evidence behind it (DisplacementUncertainty.h): the imposed surface nodes
+/// and, when block matching ran, the kept matches and every match's misfit.
+void attachUncertainty(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& result, DisplacementEvidence& evidence)
+{
+  for (std::int32_t node : job.fixedNodes) {
+    evidence.points.push_back({job.nodes[3 * std::size_t(node)], job.nodes[3 * std::size_t(node) + 1], job.nodes[3 * std::size_t(node) + 2]});
+  }
+  const std::vector<double> sigma = nodalDisplacementUncertainty(job.nodes, result.displacements, evidence);
+  vtkNew<vtkDoubleArray> array;
+  array->SetName("DisplacementUncertainty");
+  array->SetNumberOfTuples(vtkIdType(sigma.size()));
+  for (std::size_t i = 0; i < sigma.size(); ++i) array->SetValue(vtkIdType(i), sigma[i]);
+  mesh->GetPointData()->AddArray(array);
+}
+} // namespace
+
 void runSimulateStage(RunContext& context)
 {
   Stopwatch clock;
@@ -250,30 +270,35 @@ void runSimulateStage(RunContext& context)
   };
   bool served = false, prepared = false;
   FiniteElementResult result;
+  // Block matching solves again with the matches: a one-shot stage then keeps one worker for both
+  // solves (partitioned and assembled once), as a watch session does.
+  const std::optional<std::string> matchingUnavailable =
+    configuration.blockMatching.enabled ? imageMatchingUnavailable(context) : std::optional<std::string>("disabled");
+  SerialScanSession stageWorker;
   SerialScanSession* session = context.session();
+  served = session != nullptr;
+  if (!session && !matchingUnavailable) session = &stageWorker;
   if (session) {
     result = solveInSession(*session, job, options, prepared);
-    served = true;
   } else {
     result = solveWithWorker(job, options);
   }
   const FiniteElementResult surfaceOnly = result;
+  DisplacementEvidence evidence;
   nlohmann::json blockMatching = {{"enabled", configuration.blockMatching.enabled}};
-  if (configuration.blockMatching.enabled) {
-    if (const auto why = imageMatchingUnavailable(context)) {
-      blockMatching["used"] = false;
-      blockMatching["reason"] = *why;
-      context.report().addWarning("simulate: block matching did not run (" + *why + "); the solve is the surface's alone");
-    } else {
-      const ConstrainedSolve solve = [&](const FiniteElementJob& constrained) {
-        if (session) return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
-                                                   constrained.rejection);
-        return solveWithWorker(constrained, options);
-      };
-      result = solveWithImageMatches(context, mesh, job, surfaceOnly, solve, blockMatching);
-    }
+  if (configuration.blockMatching.enabled && matchingUnavailable) {
+    blockMatching["used"] = false;
+    blockMatching["reason"] = *matchingUnavailable;
+    context.report().addWarning("simulate: block matching did not run (" + *matchingUnavailable + "); the solve is the surface's alone");
+  } else if (configuration.blockMatching.enabled) {
+    const ConstrainedSolve solve = [&](const FiniteElementJob& constrained) {
+      return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
+                                    constrained.rejection);
+    };
+    result = solveWithImageMatches(context, mesh, job, surfaceOnly, solve, blockMatching, evidence);
   }
   attachDisplacements(mesh, result);
+  attachUncertainty(mesh, job, result, evidence);
   writeModel(mesh, meshFile);
   context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},
                                          {"served", served},
@@ -465,6 +490,40 @@ namespace {
 /// warped volumes on it, the preoperative image under the whole transform (Slicer warps it live),
 /// the brain surface coloured by its displacement under the rigid transform (the model frame).
 /// A rejected non-rigid update says so in the name of the transform that stands in for it.
+/// The confidence map's name in the scene.
+constexpr const char* UncertaintyMapName = "displacement uncertainty (mm)";
+
+/// The confidence map on the scan: the solve's nodal "DisplacementUncertainty" rasterised in the
+/// model frame (2 mm) and brought onto the intraoperative grid by the update's own field; outside
+/// the brain's mesh the mapping is the rigid one, whose error is taken as OutsideMeshMm. Null when the
+/// mesh has no such array (a solve from before it existed).
+ScalarImage::Pointer uncertaintyOnScan(vtkUnstructuredGrid* mesh, const DisplacementFieldImage& field, const std::string& meshName,
+                                       nlohmann::json& entry)
+{
+  constexpr float OutsideMeshMm = 0.5f;
+  if (!mesh->GetPointData()->GetArray("DisplacementUncertainty")) return nullptr;
+  const ScalarImage::Pointer modelFrame = rasteriseNodalScalar(mesh, "DisplacementUncertainty", 2.0, OutsideMeshMm, meshName);
+  ScalarImage::Pointer onScan = warpScalarVolume(*modelFrame, field);
+  float* values = onScan->GetBufferPointer();
+  const std::size_t count = onScan->GetLargestPossibleRegion().GetNumberOfPixels();
+  std::vector<float> inBrain;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!(values[i] > 0)) values[i] = OutsideMeshMm; // beyond the raster: the rigid mapping
+    if (values[i] != OutsideMeshMm) inBrain.push_back(values[i]);
+  }
+  std::sort(inBrain.begin(), inBrain.end());
+  auto share = [&inBrain](float limit) {
+    return inBrain.empty() ? 0.0 : double(std::lower_bound(inBrain.begin(), inBrain.end(), limit) - inBrain.begin()) / double(inBrain.size());
+  };
+  entry = {{"file", "displacement_uncertainty_mm.nii.gz"},
+           {"outside_mesh_mm", OutsideMeshMm},
+           {"median_mm", inBrain.empty() ? 0.0 : double(inBrain[inBrain.size() / 2])},
+           {"p95_mm", inBrain.empty() ? 0.0 : double(inBrain[std::size_t(0.95 * double(inBrain.size() - 1))])},
+           {"share_below_1mm", share(1.0f)},
+           {"share_below_2mm", share(2.0f)}};
+  return onScan;
+}
+
 void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>>& warpedScalars,
                       const fs::path& warpedLabelsFile, const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigidTransform,
                       const SpatialTransform::Pointer& wholeTransform, vtkSmartPointer<vtkPolyData> brainSurface, bool rigidFallback)
@@ -488,7 +547,11 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
     // On the intraoperative grid: the warped image is "warped" (not a moving image for the rigid
     // registration), the warped statistics and angiograms overlays.
     node->setRole(name == "warped preop image" ? "warped" : "overlay");
-    if (name != "warped preop image") node->setDisplay(VolumeDisplay::statisticalMap());
+    if (name == UncertaintyMapName) {
+      node->setDisplay(VolumeDisplay::errorEstimateMm());
+    } else if (name != "warped preop image") {
+      node->setDisplay(VolumeDisplay::statisticalMap());
+    }
   }
   auto labels = scene.add(stored(LabelMapVolumeNode::create("warped preop labels", warpedLabels), warpedLabelsFile));
   labels->setRole("warped");
@@ -593,10 +656,12 @@ std::string joined(const std::vector<std::string>& parts)
 /// at them. The compressed volumes are written on a second thread while this one writes the field
 /// and the transform (HDF5, which is not thread-safe, stays on this thread alone).
 void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer& field, const ScalarImage::Pointer& warpedImage,
-                      const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigid, bool rigidFallback)
+                      const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigid, bool rigidFallback,
+                      const ScalarImage::Pointer& uncertainty)
 {
   std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
     {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
+  if (uncertainty) scalars.emplace_back(UncertaintyMapName, context.output("displacement_uncertainty_mm.nii.gz"), uncertainty);
   for (const LoadedOverlay& overlay : context.overlays()) {
     scalars.emplace_back("warped " + overlay.name, context.output("warped_" + overlay.name + ".nii.gz"),
                          warpScalarVolume(*overlay.image, *field));
@@ -700,9 +765,17 @@ void runWarpStage(RunContext& context)
   const NonrigidUpdateTrustAssessment trust = assessUpdate(context, intraop, deformation, *warpedImage, *warpedLabels, rigidOnly);
   const double trustSeconds = trustClock.seconds();
   const bool rigidFallback = trust.trust == UpdateTrust::Rejected;
+  // The confidence map describes the update: none when the rigid result stands in for it.
+  nlohmann::json uncertaintyEntry = nullptr;
+  const ScalarImage::Pointer uncertainty =
+    rigidFallback ? nullptr : uncertaintyOnScan(mesh, *deformation.field, meshFile.string(), uncertaintyEntry);
+  if (rigidFallback) {
+    std::error_code ec;
+    fs::remove(context.output("displacement_uncertainty_mm.nii.gz"), ec);
+  }
   Stopwatch writeClock;
   writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
-                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback);
+                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback, uncertainty);
   keepRejectedUpdate(context, deformation.field, rigidFallback);
   const double writeSeconds = writeClock.seconds();
 
@@ -723,7 +796,8 @@ void runWarpStage(RunContext& context)
                                      {"jacobian_seconds", deformation.jacobianSeconds},
                                      {"warp_seconds", warpSeconds},
                                      {"trust_seconds", trustSeconds},
-                                     {"write_seconds", writeSeconds}});
+                                     {"write_seconds", writeSeconds},
+                                     {"uncertainty", uncertaintyEntry}});
   context.report().set("trust", trustEntry(trust, trustSeconds));
   if (deformation.foldedVoxels > 0) {
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +

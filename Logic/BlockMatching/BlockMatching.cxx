@@ -35,6 +35,7 @@ void requireSensible(const BlockMatchingParameters& p)
   if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
   if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
   if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
+  if (!(p.largestPredictedMm >= 0) || p.largestPredictedMm > 200) throw std::invalid_argument("block matching: the largest predicted displacement must be in [0, 200] mm");
 }
 
 /// A volume on the matching grid, x fastest.
@@ -79,7 +80,7 @@ ScalarImage::Pointer matchingGrid(const ScalarImage& preopImage, const LabelImag
   ScalarImage::SpacingType gridSpacing;
   ScalarImage::SizeType gridSize;
   itk::ContinuousIndex<double, 3> start;
-  const double margin = p.searchRadiusMm + p.blockHalfSizeMm + 25.0; // the prediction may move a block 20 mm and more
+  const double margin = p.searchRadiusMm + p.blockHalfSizeMm + p.largestPredictedMm + 2 * p.gridSpacingMm;
   for (int d = 0; d < 3; ++d) {
     gridSpacing[d] = std::max(spacing[d], p.gridSpacingMm);
     const double lowMm = low[std::size_t(d)] * spacing[d] - margin, highMm = high[std::size_t(d)] * spacing[d] + margin;

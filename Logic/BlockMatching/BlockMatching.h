@@ -34,6 +34,9 @@ struct BlockMatchingParameters {
   double minimumSimilarity = 0.5; ///< normalised cross-correlation at the peak below this: no match
   double minimumBrainShare = 0.7; ///< of the matched block's voxels classified brain in the scan
   double gridSpacingMm = 1.0;     ///< the matching grid: the preoperative grid, no finer than this
+  /// The largest displacement the prediction gives (mm): the matching grid reaches this far beyond
+  /// the brain, with the search and the block.
+  double largestPredictedMm = 25.0;
   std::vector<int> brainLabels{2, 3, 4};
   /// Preoperative labels whose tissue is gone from the scan (the tumour when resected): blocks that
   /// hold any of them are not matched.

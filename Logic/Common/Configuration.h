@@ -72,7 +72,11 @@ struct Configuration {
     double blockHalfSizeMm = 4.0, blockSpacingMm = 5.0, selectedShare = 0.5, searchRadiusMm = 6.0, minimumSimilarity = 0.5;
     double maximumBlocks = 1500;
     double stiffnessNPerMm = 0.01;  ///< of a match of correlation 1 along the directions its structure pins down
-    double rejectionRounds = 5, rejectionFraction = 0.1, outlierFactor = 2.5, rejectionFloorMm = 1.0;
+    double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 2.5, rejectionFloorMm = 1.0;
+    /// The surface's imposed nodes that moved at least this far become soft constraints of this
+    /// stiffness (the segmentation's surface is evidence like the matches, and the rejection
+    /// weighs them together); the others stay fixed. 0: every imposed node stays fixed.
+    double surfaceSoftAboveMm = 0.0, surfaceStiffnessNPerMm = 0.01;
   } blockMatching;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,

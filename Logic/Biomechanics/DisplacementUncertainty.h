@@ -1,0 +1,37 @@
+#pragma once
+// An estimate of the error of the solved displacement, per mesh node (mm): the confidence map of
+// the update. The displacement is known where evidence pins it (the imposed surface nodes, the
+// kept image matches) to that evidence's own accuracy, and less well the farther a node lies from
+// any evidence; where the evidence disagrees with the solution (the misfit of the matches around a
+// node, kept or rejected) it is known worse by that disagreement.
+//
+//   sigma(n)^2 = floor^2 + (growth * distance to the nearest evidence)^2
+//                + (local root mean square misfit of the matches within reach)^2
+//                + (share * |u(n)|)^2   (a model is wrong by a share of how far it moves the tissue)
+//
+// The weights are a model, not a measurement: the estimate is validated against the true error on
+// the built-in scenarios (Logic/Evaluation/UncertaintyEvaluation, demo's evaluation.json).
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace brainshift {
+
+struct DisplacementUncertaintyModel {
+  double floorMm = 0.3;            ///< the error where the evidence is exact
+  double growthPerMm = 0.06;       ///< added per mm of distance from the nearest evidence
+  double misfitReachMm = 8.0;      ///< matches within this distance count in a node's misfit (Gaussian, sigma reach / 2)
+  double displacementShare = 0.15; ///< of the node's own displacement
+};
+
+struct DisplacementEvidence {
+  std::vector<std::array<double, 3>> points;  ///< preoperative frame: imposed nodes and kept matches
+  std::vector<std::array<double, 3>> misfitPoints; ///< the matches, kept and rejected
+  std::vector<double> misfitsMm;              ///< their misfit under the solution
+};
+
+/// One value per node (`nodes`, `displacements`: x, y, z per node, preoperative frame, mm).
+std::vector<double> nodalDisplacementUncertainty(const std::vector<double>& nodes, const std::vector<double>& displacements,
+                                                 const DisplacementEvidence& evidence, const DisplacementUncertaintyModel& model = {});
+
+} // namespace brainshift
