@@ -1,0 +1,136 @@
+// Block matching on an analytic texture of known motion: the tissue moved by a known translation,
+// seen through a rigid transform and an inverted (T2-like) contrast with noise.
+// - the matches recover the translation (median error below a quarter of a voxel), through the
+//   inverted contrast (the remap learned from the scan makes the correlation positive);
+// - a prediction 4 mm off is corrected within the search window;
+// - blocks whose match falls in a cavity of the scan are dropped, none is kept there;
+// - blocks holding an excluded tissue (a resected tumour) are not matched;
+// - absurd parameters are refused.
+#include "BlockMatching.h"
+#include "BrainShiftTestingSupport.h"
+#include "SyntheticData.h"
+
+#include <itkEuler3DTransform.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+#include <random>
+
+namespace {
+using namespace brainshift;
+
+/// A texture without a period in the search window: cosines of wavelengths 6 to 17 mm.
+double texture(const PhysicalPoint& p)
+{
+  const double k[6][3] = {{0.9, 0.3, 0.1}, {-0.2, 0.7, 0.4}, {0.3, -0.4, 0.8}, {0.5, 0.5, -0.5}, {-0.6, 0.2, 0.5}, {0.1, -0.8, -0.3}};
+  const double phase[6] = {0.3, 1.1, 2.0, 0.7, 2.9, 1.6};
+  double v = 0;
+  for (int i = 0; i < 6; ++i) v += std::cos(k[i][0] * p[0] + k[i][1] * p[1] + k[i][2] * p[2] + phase[i]) / (1 + 0.3 * i);
+  return 100 + 30 * v;
+}
+
+double distance(const PhysicalPoint& p, const std::array<double, 3>& c)
+{
+  return std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+}
+} // namespace
+
+int BlockMatchingTest(int, char*[])
+{
+  return testing::runTest("BlockMatchingTest", [] {
+    const std::array<double, 3> shift{2.4, -1.7, 3.1};
+    const std::array<double, 3> cavity{-15, 10, 5}; // in the scan's preoperative frame, after the shift
+    const ImageGeometry preopGrid = testing::grid({{64, 64, 64}}, {1.5, 1.5, 1.5}, testing::point(-48, -48, -48));
+    const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(preopGrid, [](const PhysicalPoint& p) { return float(texture(p)); });
+    const std::array<double, 3> tumour{15, -12, 0};
+    LabelImage::Pointer preopLabels = testing::imageOn<LabelImage>(preopGrid, [&](const PhysicalPoint& p) {
+      const double r = distance(p, {0, 0, 0});
+      return LabelPixel(r > 38 ? 0 : distance(p, tumour) < 7 ? 4 : 2);
+    });
+    // The scan: its own grid and pose, the tissue moved by `shift`, contrast inverted, noise.
+    auto rigid = itk::Euler3DTransform<double>::New(); // intraoperative -> preoperative
+    rigid->SetRotation(0.05, -0.03, 0.08);
+    itk::Euler3DTransform<double>::OutputVectorType translation;
+    translation[0] = 1.5;
+    translation[1] = -2.0;
+    translation[2] = 0.5;
+    rigid->SetTranslation(translation);
+    const ImageGeometry intraopGrid = testing::grid({{70, 70, 50}}, {1.4, 1.4, 2.0}, testing::point(-49, -49, -50));
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> noise(0.0, 2.0);
+    auto moved = [&](const PhysicalPoint& y) {
+      const PhysicalPoint p = rigid->TransformPoint(y);
+      return testing::point(p[0] - shift[0], p[1] - shift[1], p[2] - shift[2]); // the preoperative tissue seen at y
+    };
+    const ScalarImage::Pointer intraop = testing::imageOn<ScalarImage>(intraopGrid, [&](const PhysicalPoint& y) {
+      return float(400 - 2.5 * texture(moved(y)) + noise(rng));
+    });
+    const LabelImage::Pointer intraopLabels = testing::imageOn<LabelImage>(intraopGrid, [&](const PhysicalPoint& y) {
+      const PhysicalPoint x = moved(y);
+      return LabelPixel(distance(x, {0, 0, 0}) > 38 || distance(rigid->TransformPoint(y), cavity) < 9 ? 0 : 2);
+    });
+
+    BlockMatchingParameters parameters;
+    parameters.blockHalfSizeMm = 4.5;
+    parameters.blockSpacingMm = 6;
+    parameters.selectedShare = 1.0;
+    parameters.excludedLabels = {4};
+    const DisplacementPrediction none;
+    const BlockMatchingResult result = matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters);
+    std::vector<double> errors;
+    std::size_t nearTumour = 0, inCavity = 0;
+    for (const BlockMatch& m : result.matches) {
+      errors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
+      if (distance(m.centre, tumour) < 7 + parameters.blockHalfSizeMm) ++nearTumour;
+      PhysicalPoint target = m.centre;
+      for (int a = 0; a < 3; ++a) target[a] += m.displacement[std::size_t(a)];
+      if (distance(target, cavity) < 6) ++inCavity; // a block may reach 30 % into it (minimumBrainShare)
+    }
+    std::sort(errors.begin(), errors.end());
+    const double median = errors.empty() ? 99 : errors[errors.size() / 2];
+    const double p95 = errors.empty() ? 99 : errors[std::size_t(0.95 * double(errors.size() - 1))];
+    std::cout << result.candidates << " candidates, " << result.selected << " selected, " << result.matches.size() << " matched ("
+              << result.lowSimilarity << " low similarity, " << result.outsideBrain << " outside the brain, " << result.atSearchEdge
+              << " at the search edge); error median " << median << " mm, p95 " << p95 << " mm; remap eta^2 "
+              << result.remapCorrelationRatio << "; near the tumour " << nearTumour << ", into the cavity " << inCavity << '\n';
+    BS_CHECK_MSG(result.selected >= 100, result.selected);
+    BS_CHECK_MSG(result.matches.size() >= result.selected * 8 / 10, result.matches.size());
+    BS_CHECK_MSG(median < 0.35, median);
+    BS_CHECK_MSG(p95 < 0.8, p95);
+    BS_CHECK_MSG(result.outsideBrain > 0, result.outsideBrain);
+    BS_CHECK_MSG(inCavity == 0, inCavity);
+    BS_CHECK_MSG(nearTumour == 0, nearTumour);
+    for (const BlockMatch& m : result.matches) BS_CHECK_MSG(m.similarity > 0.5, m.similarity); // positive through the inversion
+
+    // A prediction 4 mm off: found again within the search window.
+    const DisplacementPrediction off = [&](const PhysicalPoint&) { return std::array<double, 3>{shift[0] + 2.5, shift[1] - 2.0, shift[2] + 2.4}; };
+    const BlockMatchingResult corrected = matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, off, parameters);
+    std::vector<double> correctedErrors;
+    for (const BlockMatch& m : corrected.matches) {
+      correctedErrors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
+    }
+    std::sort(correctedErrors.begin(), correctedErrors.end());
+    const double correctedMedian = correctedErrors.empty() ? 99 : correctedErrors[correctedErrors.size() / 2];
+    std::cout << "prediction 4 mm off: " << corrected.matches.size() << " matched, error median " << correctedMedian << " mm\n";
+    BS_CHECK_MSG(corrected.matches.size() >= result.matches.size() * 9 / 10, corrected.matches.size());
+    BS_CHECK_MSG(correctedMedian < 0.35, correctedMedian);
+
+    // The remap is learned where the scan's brain overlaps the preoperative one: here the whole
+    // texture moved by 4 mm (wavelengths of 6 to 17 mm), so it sees little of the relation; the
+    // same scan without the shift shows it whole.
+    const ScalarImage::Pointer unmoved = testing::imageOn<ScalarImage>(intraopGrid, [&](const PhysicalPoint& y) {
+      return float(400 - 2.5 * texture(rigid->TransformPoint(y)) + noise(rng));
+    });
+    const BlockMatchingResult still = matchBlocks(*preop, *preopLabels, *unmoved, *intraopLabels, *rigid, none, parameters);
+    std::cout << "without the shift: remap eta^2 " << still.remapCorrelationRatio << " (with it " << result.remapCorrelationRatio << ")\n";
+    BS_CHECK_MSG(still.remapCorrelationRatio > 0.8, still.remapCorrelationRatio);
+    BS_CHECK_MSG(result.remapCorrelationRatio < 0.5, result.remapCorrelationRatio);
+
+    parameters.searchRadiusMm = 0;
+    BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "search radius");
+    parameters.searchRadiusMm = 6;
+    parameters.selectedShare = 1.5;
+    BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selected share");
+  });
+}
