@@ -618,6 +618,39 @@ HardScenario)
   [ "$(json_value "$hard/case/case.json" "['parameters']['gap']")" = "fluid-and-air" ] || fail "the scenario's gap is not fluid and air"
   ;;
 
+ImageDrivenInterior)
+  # Block matching inside the brain and its matches in the solve (on by default), on a small case
+  # with 8 % noise and a resection (blocks that disagree): the matches are used and the worst
+  # rejected, the misfit falls, and the update is never worse than the surface-driven one alone by
+  # more than 0.1 mm; the confidence map is written and calls reliable what is.
+  interior=$work/image-driven
+  rm -rf "$interior" "$interior-surface-only"
+  "$brainshift" demo --size small --scenario lf15-noise8 --output-dir "$interior" > "$work/image-driven.log" 2>&1 \
+    || fail "demo --scenario lf15-noise8 failed: $(tail -n 3 "$work/image-driven.log")"
+  r=$interior/report.json
+  [ "$(json_value "$r" "['stages']['simulate']['block_matching']['used']")" = "True" ] || fail "block matching was not used"
+  float_check "$r" "['stages']['simulate']['block_matching']['kept']" "> 200"
+  float_check "$r" "['stages']['simulate']['block_matching']['rejected']" "> 0"
+  float_check "$r" "['stages']['simulate']['block_matching']['solves']" ">= 2"
+  before=$(json_value "$r" "['stages']['simulate']['block_matching']['rms_misfit_surface_only_mm']")
+  float_check "$r" "['stages']['simulate']['block_matching']['rms_misfit_per_solve_mm'][-1]" "< 0.7 * $before"
+  [ -s "$interior/block_matches.vtp" ] || fail "block_matches.vtp not written"
+  [ -s "$interior/displacement_uncertainty_mm.nii.gz" ] || fail "the confidence map was not written"
+  grep -q "displacement_uncertainty_mm.nii.gz" "$interior/scene.mrml" || fail "the confidence map is not in the scene"
+  float_check "$interior/evaluation.json" "['uncertainty']['called_below_1mm_truly_below_1_5mm']" ">= 0.9"
+  printf '{"block_matching": {"enabled": false}}\n' > "$work/surface-only.json"
+  c=$interior/case
+  "$brainshift" register --preop-image "$c/preop_image.nii.gz" --preop-labels "$c/preop_labels.nii.gz" \
+    --intraop-image "$c/intraop_image.nii.gz" --output-dir "$interior-surface-only" --config "$work/surface-only.json" >/dev/null \
+    || fail "register without block matching exited $?"
+  "$brainshift" evaluate --transform "$interior-surface-only/intraop_to_preop.h5" --landmarks "$c/landmarks.csv" \
+    --json "$interior-surface-only/evaluation.json" >/dev/null || fail "evaluate exited $?"
+  surface_only=$(json_value "$interior-surface-only/evaluation.json" "['mean_mm']")
+  float_check "$interior/evaluation.json" "['transforms']['brainshift']['mean_mm']" "<= $surface_only + 0.1"
+  [ "$(json_value "$interior-surface-only/report.json" "['stages']['simulate']['block_matching']['enabled']")" = "False" ] \
+    || fail "block matching ran although disabled"
+  ;;
+
 *)
   echo "unknown case $case_name" >&2
   exit 2
