@@ -145,6 +145,48 @@ std::size_t softenMovedSurface(FiniteElementJob& job, double softAboveMm, double
   return softened;
 }
 
+/// The imposed nodes the image contradicts: at least 3 rejected matches (similarity >= 0.8) within
+/// `reachMm`, whose residuals u(p) - target agree in direction (their mean at least 0.7 of their
+/// mean length) and reach 2 mm. Returns indices into `job.fixedNodes`.
+std::vector<std::size_t> contradictedSurfaceNodes(const FiniteElementJob& job, const std::vector<BlockMatch>& matches,
+                                                  const ImageMatchConstraints& constraints, std::size_t matchConstraints,
+                                                  const FiniteElementResult& result, double reachMm)
+{
+  struct Residual {
+    std::array<double, 3> at, r;
+  };
+  std::vector<Residual> rejected;
+  for (std::size_t c = 0; c < matchConstraints && c < result.softConstraintKept.size(); ++c) {
+    const BlockMatch& m = matches[constraints.matchOfConstraint[c]];
+    if (result.softConstraintKept[c] || m.similarity < 0.8) continue;
+    const SoftConstraint& s = constraints.constraints[c];
+    Residual residual{{m.centre[0], m.centre[1], m.centre[2]}, {-s.target[0], -s.target[1], -s.target[2]}};
+    for (int k = 0; k < 4; ++k) {
+      const std::size_t node = std::size_t(job.tetrahedra[4 * std::size_t(s.tetrahedron) + std::size_t(k)]);
+      for (int d = 0; d < 3; ++d) residual.r[std::size_t(d)] += s.weights[std::size_t(k)] * result.displacements[3 * node + std::size_t(d)];
+    }
+    rejected.push_back(residual);
+  }
+  std::vector<std::size_t> contradicted;
+  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
+    const double* x = &job.nodes[3 * std::size_t(job.fixedNodes[f])];
+    std::array<double, 3> sum{0, 0, 0};
+    double lengths = 0;
+    int count = 0;
+    for (const Residual& residual : rejected) {
+      const double d2 = std::pow(x[0] - residual.at[0], 2) + std::pow(x[1] - residual.at[1], 2) + std::pow(x[2] - residual.at[2], 2);
+      if (d2 > reachMm * reachMm) continue;
+      for (int a = 0; a < 3; ++a) sum[std::size_t(a)] += residual.r[std::size_t(a)];
+      lengths += std::sqrt(residual.r[0] * residual.r[0] + residual.r[1] * residual.r[1] + residual.r[2] * residual.r[2]);
+      ++count;
+    }
+    if (count < 3) continue;
+    const double mean = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]) / count;
+    if (mean >= 2.0 && mean >= 0.7 * lengths / count) contradicted.push_back(f);
+  }
+  return contradicted;
+}
+
 } // namespace
 
 std::optional<std::string> imageMatchingUnavailable(RunContext& context)
@@ -213,7 +255,29 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   const std::size_t matchConstraints = constrained.softConstraints.size();
   const std::size_t softSurface = softenMovedSurface(constrained, configuration.blockMatching.surfaceSoftAboveMm,
                                                      configuration.blockMatching.surfaceStiffnessNPerMm);
-  const FiniteElementResult result = solve(constrained);
+  FiniteElementResult result = solve(constrained);
+  const double reach = configuration.blockMatching.freeContradictedSurfaceReachMm;
+  std::size_t freed = 0;
+  if (reach > 0) {
+    const std::vector<std::size_t> contradicted = contradictedSurfaceNodes(constrained, matching.matches, constraints, matchConstraints, result, reach);
+    // Freed, the nodes follow the elastic model and the matches beneath them; a few fixed nodes must stay.
+    if (!contradicted.empty() && contradicted.size() < constrained.fixedNodes.size() / 2) {
+      std::vector<char> free(constrained.fixedNodes.size(), 0);
+      for (std::size_t f : contradicted) free[f] = 1;
+      FiniteElementJob second = constrained;
+      second.fixedNodes.clear();
+      second.fixedDisplacements.clear();
+      for (std::size_t f = 0; f < constrained.fixedNodes.size(); ++f) {
+        if (free[f]) continue;
+        second.fixedNodes.push_back(constrained.fixedNodes[f]);
+        second.fixedDisplacements.insert(second.fixedDisplacements.end(), constrained.fixedDisplacements.begin() + std::ptrdiff_t(3 * f),
+                                         constrained.fixedDisplacements.begin() + std::ptrdiff_t(3 * f + 3));
+      }
+      result = solve(second);
+      freed = contradicted.size();
+    }
+  }
+  entry["surface_nodes_freed"] = freed;
   std::size_t kept = 0, surfaceKept = 0;
   for (std::size_t i = 0; i < result.softConstraintKept.size(); ++i) (i < matchConstraints ? kept : surfaceKept) += result.softConstraintKept[i];
   entry["surface_soft_nodes"] = softSurface;

@@ -191,7 +191,8 @@ Configuration Configuration::load(const fs::path& path)
       {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
       {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
       {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm},
-      {"surface_soft_above_mm", &b.surfaceSoftAboveMm}, {"surface_stiffness_n_per_mm", &b.surfaceStiffnessNPerMm}};
+      {"surface_soft_above_mm", &b.surfaceSoftAboveMm}, {"surface_stiffness_n_per_mm", &b.surfaceStiffnessNPerMm},
+      {"free_contradicted_surface_reach_mm", &b.freeContradictedSurfaceReachMm}};
     std::set<std::string> keys{"enabled"};
     for (const auto& [key, target] : numbers) keys.insert(key);
     requireKnownKeys(c, keys, file + ": block_matching");
@@ -362,6 +363,7 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("rejection_floor_mm", b.rejectionFloorMm, 0, 100);
   within("surface_soft_above_mm", b.surfaceSoftAboveMm, 0, 100);
   within("surface_stiffness_n_per_mm", b.surfaceStiffnessNPerMm, 0, 100);
+  within("free_contradicted_surface_reach_mm", b.freeContradictedSurfaceReachMm, 0, 50);
 }
 
 } // namespace brainshift
