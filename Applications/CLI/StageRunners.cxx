@@ -386,6 +386,7 @@ void runSurfaceStage(RunContext& context)
   parameters.maximumIterations = configuration.surfaceMaximumIterations;
   parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
   parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
+  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
   names.labels = labelsFile.string();
@@ -411,6 +412,10 @@ void runSurfaceStage(RunContext& context)
                                         {"free_nodes", {{"resected_tumour", result.freeResected},
                                                         {"outside_image", result.freeOutsideImage},
                                                         {"unmatched", result.freeUnmatched}}},
+                                        {"held_outside_image", result.heldOutsideImage},
+                                        {"field_of_view", {{"surface_nodes_inside", result.coveredSurfaceNodes},
+                                                           {"brain_ml_inside", result.coveredBrainMl},
+                                                           {"brain_ml", result.meshedBrainMl}}},
                                         {"iterations", result.iterations},
                                         {"converged", result.converged},
                                         {"initial_mean_residual_mm", result.initialMeanResidualMm},
@@ -534,6 +539,10 @@ NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImag
     if (surface.contains("surface_nodes") && surface.contains("free_nodes") && surface["free_nodes"].is_object() &&
         surface["free_nodes"].contains("unmatched")) {
       in.surfaceNodes = surface["surface_nodes"].get<std::size_t>();
+      // A partial field of view: the share of the nodes it covers that found no boundary.
+      if (surface.contains("field_of_view") && surface["field_of_view"].contains("surface_nodes_inside")) {
+        in.surfaceNodes = surface["field_of_view"]["surface_nodes_inside"].get<std::size_t>();
+      }
       in.unmatchedSurfaceNodes = surface["free_nodes"]["unmatched"].get<std::size_t>();
     }
   }
