@@ -84,7 +84,7 @@ struct ActiveSurfaceParameters {
   /// A partial field of view (a slab around the craniotomy): the surface nodes it does not cover
   /// are left free for the elastic model (false), or held at rest where the skull holds them (true:
   /// imposed, zero displacement).
-  bool holdOutsideFieldOfView = false;
+  bool holdOutsideFieldOfView = true;
   /// Too little of the brain seen to say anything: fewer surface nodes than this share, or less
   /// brain than this volume, inside the intraoperative field of view (InputError naming both).
   double minimumCoveredSurfaceShare = 0.15;

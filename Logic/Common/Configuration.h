@@ -66,7 +66,7 @@ struct Configuration {
   bool surfaceMatchAlongSinkingDirection = true;
   bool surfaceSnapToBoundary = false;
   /// Surface nodes outside the intraoperative field of view: held at rest (true) or left free.
-  bool surfaceHoldOutsideFieldOfView = false;
+  bool surfaceHoldOutsideFieldOfView = true;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a
