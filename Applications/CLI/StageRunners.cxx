@@ -156,6 +156,28 @@ LabelImage::Pointer labelsSeenByTheScan(const LabelImage& preop, const SpatialTr
   }
   return copy;
 }
+
+/// The spatial prior: the preoperative labels through the rigid transform (the tissues the scan
+/// shows), or (refine) the preoperative labels warped by the last solve, on the intraoperative grid.
+TissueClassificationResult classifyWithPrior(RunContext& context, const SpatialTransform& rigid,
+                                             const std::optional<std::vector<TissuePrototype>>& prototypes,
+                                             TissueClassificationParameters parameters)
+{
+  const LabelImage* prior = context.warpedPrior();
+  if (prior) {
+    const auto identity = itk::IdentityTransform<double, 3>::New();
+    return classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters);
+  }
+  std::vector<std::string> fieldOfViewWarnings;
+  const LabelImage::Pointer seen =
+    labelsSeenByTheScan(context.preopLabels("classify"), rigid, context.intraopImage("classify"), fieldOfViewWarnings);
+  context.report().addWarnings(fieldOfViewWarnings);
+  if (SerialScanSession* session = context.session(); session && !seen) { // the preoperative maps once per session
+    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
+    parameters.preoperativeMaps = session->tissueMaps;
+  }
+  return classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), rigid, prototypes, parameters);
+}
 } // namespace
 
 void runClassifyStage(RunContext& context)
@@ -191,22 +213,8 @@ void runClassifyStage(RunContext& context)
   if (!context.options().preopImage.empty()) {
     parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
   }
-  // The spatial prior: the preoperative labels through the rigid transform, or (refine) the
-  // preoperative labels warped by the last solve, already on the intraoperative grid.
   const LabelImage* prior = context.warpedPrior();
-  const auto identity = itk::IdentityTransform<double, 3>::New();
-  std::vector<std::string> fieldOfViewWarnings;
-  const LabelImage::Pointer seen =
-    prior ? nullptr : labelsSeenByTheScan(context.preopLabels("classify"), *rigid, context.intraopImage("classify"), fieldOfViewWarnings);
-  if (SerialScanSession* session = context.session(); session && !prior && !seen) { // the preoperative maps once per session
-    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
-    parameters.preoperativeMaps = session->tissueMaps;
-  }
-  const TissueClassificationResult result =
-    prior ? classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters)
-          : classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), *rigid, prototypes,
-                            parameters);
-  context.report().addWarnings(fieldOfViewWarnings);
+  const TissueClassificationResult result = classifyWithPrior(context, *rigid, prototypes, parameters);
   // refine: the first classification stays where the solve moved nothing.
   const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
                                    ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
