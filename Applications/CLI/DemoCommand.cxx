@@ -37,6 +37,7 @@ struct DemoOptions {
   std::string scenario = "default";
   std::string contrast = "t1", tumour = "rim-enhancing", gap = "dark", truth = "kinematic";
   bool cavityRim = false;
+  std::string fieldOfView = "whole-head";
   /// The options given on the command line (they override the scenario's values).
   std::set<std::string> given;
 };
@@ -63,6 +64,7 @@ CaseParameters caseParametersOf(const DemoOptions& o)
   if (given("--gap")) p.gap = gapContentFromString(o.gap);
   if (given("--cavity-rim")) p.cavityRim = o.cavityRim;
   if (given("--truth")) p.truth = truthModelFromString(o.truth);
+  if (given("--field-of-view")) p.fieldOfView = fieldOfViewFromString(o.fieldOfView);
   p.validate();
   return p;
 }
@@ -137,6 +139,9 @@ void addDemoCommand(CLI::App& app)
   command->add_option("--truth", options->truth,
                       "the truth deformation: kinematic (analytic subsidence) or finite-element-sliding (CalculiX, sliding "
                       "brain surface, fixed skull base; about 30 s more)")->capture_default_str();
+  command->add_option("--field-of-view", options->fieldOfView,
+                      "what the intraoperative scan covers: whole-head, or slab (30 axial slices of 2.5 mm around the "
+                      "craniotomy and the tumour)")->capture_default_str();
   command->add_option("--config", options->run.config, "JSON configuration for register");
   command->add_option("--mesh-resolution", options->run.meshResolutionMm, "for register: tetrahedron edge length, mm");
   command->add_option("--mesh-grading", options->run.meshGrading, "for register: mesh grading (0: uniform)");
@@ -145,7 +150,7 @@ void addDemoCommand(CLI::App& app)
 
   command->callback([command, options] {
     for (const char* name : {"--seed", "--shift", "--craniotomy", "--no-resection", "--rotation", "--translation", "--noise",
-                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim", "--truth"}) {
+                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim", "--truth", "--field-of-view"}) {
       if (command->count(name) > 0) options->given.insert(name);
     }
     const CaseParameters parameters = caseParametersOf(*options);

@@ -11,6 +11,7 @@
 
 #include <itkCompositeTransform.h>
 #include <itkIdentityTransform.h>
+#include <itkImageRegionConstIteratorWithIndex.h>
 
 #include <tuple>
 #include <type_traits>
@@ -113,6 +114,73 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
           {"tumour_like_share", e.tumourLikeShare},
           {"parenchyma_like_share", e.parenchymaLikeShare}};
 }
+
+/// A partial field of view (a slab around the craniotomy) may miss a whole tissue, e.g. the
+/// ventricles under a superficial craniotomy: no prototypes of it could be chosen. The tissues
+/// inside the brain (labels above parenchyma, 2) of which less than `minimumMl` of the aligned
+/// preoperative labels lie inside the intraoperative image are classified as parenchyma: a copy
+/// of the labels with them so relabelled, null when every tissue is seen.
+LabelImage::Pointer labelsSeenByTheScan(const LabelImage& preop, const SpatialTransform& rigid, const ScalarImage& intraop,
+                                        std::vector<std::string>& warnings, double minimumMl = 2.0)
+{
+  const SpatialTransform::InverseTransformBasePointer preopToIntraop = rigid.GetInverseTransform();
+  if (!preopToIntraop) return nullptr;
+  constexpr LabelPixel parenchyma = 2;
+  std::map<LabelPixel, std::size_t> present, inside;
+  itk::ImageRegionConstIteratorWithIndex<LabelImage> it(&preop, preop.GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    if (it.Get() <= parenchyma) continue;
+    ++present[it.Get()];
+    PhysicalPoint x;
+    preop.TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    itk::ContinuousIndex<double, 3> index;
+    if (intraop.TransformPhysicalPointToContinuousIndex(preopToIntraop->TransformPoint(x), index)) ++inside[it.Get()];
+  }
+  const double voxelMl = preop.GetSpacing()[0] * preop.GetSpacing()[1] * preop.GetSpacing()[2] / 1000.0;
+  std::set<LabelPixel> unseen;
+  for (const auto& [label, count] : present) {
+    const double insideMl = double(inside[label]) * voxelMl;
+    if (insideMl >= minimumMl) continue;
+    unseen.insert(label);
+    char line[256];
+    std::snprintf(line, sizeof(line), "classify: %s (label %d) lies outside the intraoperative field of view (%.1f of %.1f ml "
+                  "inside); classified as parenchyma", tissueName(label).c_str(), int(label), insideMl, double(count) * voxelMl);
+    warnings.push_back(line);
+  }
+  if (unseen.empty()) return nullptr;
+  auto copy = LabelImage::New();
+  copy->CopyInformation(&preop);
+  copy->SetRegions(preop.GetLargestPossibleRegion());
+  copy->Allocate();
+  const LabelPixel* from = preop.GetBufferPointer();
+  LabelPixel* to = copy->GetBufferPointer();
+  for (std::size_t i = 0, n = preop.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+    to[i] = unseen.count(from[i]) ? parenchyma : from[i];
+  }
+  return copy;
+}
+
+/// The spatial prior: the preoperative labels through the rigid transform (the tissues the scan
+/// shows), or (refine) the preoperative labels warped by the last solve, on the intraoperative grid.
+TissueClassificationResult classifyWithPrior(RunContext& context, const SpatialTransform& rigid,
+                                             const std::optional<std::vector<TissuePrototype>>& prototypes,
+                                             TissueClassificationParameters parameters)
+{
+  const LabelImage* prior = context.warpedPrior();
+  if (prior) {
+    const auto identity = itk::IdentityTransform<double, 3>::New();
+    return classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters);
+  }
+  std::vector<std::string> fieldOfViewWarnings;
+  const LabelImage::Pointer seen =
+    labelsSeenByTheScan(context.preopLabels("classify"), rigid, context.intraopImage("classify"), fieldOfViewWarnings);
+  context.report().addWarnings(fieldOfViewWarnings);
+  if (SerialScanSession* session = context.session(); session && !seen) { // the preoperative maps once per session
+    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
+    parameters.preoperativeMaps = session->tissueMaps;
+  }
+  return classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), rigid, prototypes, parameters);
+}
 } // namespace
 
 void runClassifyStage(RunContext& context)
@@ -148,17 +216,8 @@ void runClassifyStage(RunContext& context)
   if (!context.options().preopImage.empty()) {
     parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
   }
-  // The spatial prior: the preoperative labels through the rigid transform, or (refine) the
-  // preoperative labels warped by the last solve, already on the intraoperative grid.
   const LabelImage* prior = context.warpedPrior();
-  const auto identity = itk::IdentityTransform<double, 3>::New();
-  if (SerialScanSession* session = context.session(); session && !prior) { // the preoperative maps once per session
-    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
-    parameters.preoperativeMaps = session->tissueMaps;
-  }
-  const TissueClassificationResult result =
-    prior ? classifyTissues(context.intraopImage("classify"), *prior, *identity, prototypes, parameters)
-          : classifyTissues(context.intraopImage("classify"), context.preopLabels("classify"), *rigid, prototypes, parameters);
+  const TissueClassificationResult result = classifyWithPrior(context, *rigid, prototypes, parameters);
   // refine: the first classification stays where the solve moved nothing.
   const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
                                    ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
@@ -430,6 +489,7 @@ void runSurfaceStage(RunContext& context)
   parameters.maximumIterations = configuration.surfaceMaximumIterations;
   parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
   parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
+  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
   names.labels = labelsFile.string();
@@ -455,6 +515,10 @@ void runSurfaceStage(RunContext& context)
                                         {"free_nodes", {{"resected_tumour", result.freeResected},
                                                         {"outside_image", result.freeOutsideImage},
                                                         {"unmatched", result.freeUnmatched}}},
+                                        {"held_outside_image", result.heldOutsideImage},
+                                        {"field_of_view", {{"surface_nodes_inside", result.coveredSurfaceNodes},
+                                                           {"brain_ml_inside", result.coveredBrainMl},
+                                                           {"brain_ml", result.meshedBrainMl}}},
                                         {"iterations", result.iterations},
                                         {"converged", result.converged},
                                         {"initial_mean_residual_mm", result.initialMeanResidualMm},
@@ -616,6 +680,10 @@ NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImag
     if (surface.contains("surface_nodes") && surface.contains("free_nodes") && surface["free_nodes"].is_object() &&
         surface["free_nodes"].contains("unmatched")) {
       in.surfaceNodes = surface["surface_nodes"].get<std::size_t>();
+      // A partial field of view: the share of the nodes it covers that found no boundary.
+      if (surface.contains("field_of_view") && surface["field_of_view"].contains("surface_nodes_inside")) {
+        in.surfaceNodes = surface["field_of_view"]["surface_nodes_inside"].get<std::size_t>();
+      }
       in.unmatchedSurfaceNodes = surface["free_nodes"]["unmatched"].get<std::size_t>();
     }
   }
@@ -652,6 +720,34 @@ std::string joined(const std::vector<std::string>& parts)
   return text;
 }
 
+/// The whole mapping x = y + d(y) as a transform file: the rigid transform R after the field of what
+/// it leaves, e(y) = R^-1(y + d(y)) - y. Inside the field's grid it is the same mapping (R is
+/// affine, so interpolating e then applying R is interpolating d); beyond it (a slab scan covers
+/// part of the head) the mapping is the rigid one, not the identity a displacement field alone gives
+/// outside its grid.
+SpatialTransform::Pointer wholeMappingTransform(const DisplacementFieldImage& field, const SpatialTransform& rigid)
+{
+  const SpatialTransform::InverseTransformBasePointer inverse = rigid.GetInverseTransform();
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  if (!inverse) throw MethodError("warp: the rigid transform cannot be inverted");
+  auto residual = DisplacementFieldImage::New();
+  residual->CopyInformation(&field);
+  residual->SetRegions(field.GetLargestPossibleRegion());
+  residual->Allocate();
+  itk::ImageRegionConstIteratorWithIndex<DisplacementFieldImage> it(&field, field.GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint y;
+    field.TransformIndexToPhysicalPoint(it.GetIndex(), y);
+    const PhysicalPoint z = inverse->TransformPoint(y + it.Get());
+    DisplacementVector e;
+    for (unsigned k = 0; k < 3; ++k) e[k] = typename DisplacementVector::ValueType(z[k] - y[k]);
+    residual->SetPixel(it.GetIndex(), e);
+  }
+  composite->AddTransform(const_cast<SpatialTransform*>(&rigid)); // applied second
+  composite->AddTransform(makeDisplacementFieldTransform(residual)); // applied first
+  return SpatialTransform::Pointer(composite.GetPointer());
+}
+
 /// The mapping shown, as a field, a transform file and warped volumes, then the scene that points
 /// at them. The compressed volumes are written on a second thread while this one writes the field
 /// and the transform (HDF5, which is not thread-safe, stays on this thread alone).
@@ -671,10 +767,10 @@ void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer
     for (const auto& [name, file, image] : scalars) writeScalarVolume(image, file);
     writeLabelVolume(warpedLabels, warpedLabelsFile);
   });
-  auto composite = itk::CompositeTransform<double, 3>::New();
+  SpatialTransform::Pointer composite;
   try {
     writeDisplacementField(field, context.output("displacement_intraop_to_preop.nrrd"));
-    composite->AddTransform(makeDisplacementFieldTransform(field));
+    composite = wholeMappingTransform(*field, *rigid);
     writeTransform(composite, context.output("intraop_to_preop.h5"));
   } catch (...) {
     volumesWritten.wait(); // the thread's references must outlive it
@@ -684,13 +780,13 @@ void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer
   const fs::path surfaceFile = context.output("brain_surface.vtp");
   vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
   if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
-  writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, SpatialTransform::Pointer(composite.GetPointer()),
-                   brainSurface, rigidFallback);
+  writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, composite, brainSurface, rigidFallback);
 }
 
 /// A rejected update is kept aside, for whoever must see what was set aside (and for the
 /// benchmark that scores the assessment); an accepted one removes an earlier run's.
-void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Pointer& updateField, bool rejected)
+void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Pointer& updateField, const SpatialTransform& rigid,
+                        bool rejected)
 {
   const fs::path file = context.output("rejected_intraop_to_preop.h5");
   if (!rejected) {
@@ -698,9 +794,7 @@ void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Point
     fs::remove(file, ec);
     return;
   }
-  auto composite = itk::CompositeTransform<double, 3>::New();
-  composite->AddTransform(makeDisplacementFieldTransform(updateField));
-  writeTransform(composite, file);
+  writeTransform(wholeMappingTransform(*updateField, rigid), file);
 }
 
 /// The verdict on the command line; a doubtful update is a warning, a rejected one (its files
@@ -776,7 +870,7 @@ void runWarpStage(RunContext& context)
   Stopwatch writeClock;
   writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
                    rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback, uncertainty);
-  keepRejectedUpdate(context, deformation.field, rigidFallback);
+  keepRejectedUpdate(context, deformation.field, *rigid, rigidFallback);
   const double writeSeconds = writeClock.seconds();
 
   context.report().setStage("warp", {{"wall_seconds", clock.seconds()},

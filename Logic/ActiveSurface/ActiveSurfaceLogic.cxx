@@ -349,6 +349,50 @@ typename TImage::Pointer cropped(const TImage& image, const itk::ImageRegion<3>&
   return out;
 }
 
+/// Free reasons of the surface nodes (0: imposed, matched to the target).
+enum FreeReason : unsigned char {
+  Matched = 0,
+  ResectedTumour = 1,
+  OutsideImage = 2,     ///< outside the field of view, left to the elastic model
+  Unmatched = 3,
+  HeldOutsideImage = 4  ///< outside the field of view, held at rest (imposed, zero displacement)
+};
+
+/// The meshed brain's volume (ml) whose tetrahedra have their centroid inside the intraoperative
+/// grid (through `toIndex`), and the whole (`totalMl`).
+double coveredBrainVolumeMl(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const std::set<int>& brain,
+                            const PreopToIntraopIndex& toIndex, const ImageGeometry& grid, double& totalMl)
+{
+  double covered = 0;
+  totalMl = 0;
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    if (!brain.count(int(std::lround(cellLabels->GetComponent(c, 0))))) continue;
+    mesh->GetCellPoints(c, ids);
+    Vec q[4];
+    for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v].data());
+    const double volumeMl = std::abs((q[1] - q[0]).dot((q[2] - q[0]).cross(q[3] - q[0]))) / 6000.0;
+    totalMl += volumeMl;
+    if (TrilinearVolume::insideGrid(toIndex(0.25 * (q[0] + q[1] + q[2] + q[3])), grid)) covered += volumeMl;
+  }
+  return covered;
+}
+
+/// Refuses (InputError) a field of view that covers too little of the brain to say anything,
+/// naming both figures.
+void requireEnoughCoverage(const ActiveSurfaceResult& r, const ActiveSurfaceParameters& p, const std::string& labelsName)
+{
+  const double share = r.surfaceNodes ? double(r.coveredSurfaceNodes) / double(r.surfaceNodes) : 0.0;
+  if (share >= p.minimumCoveredSurfaceShare && r.coveredBrainMl >= p.minimumCoveredBrainMl) return;
+  std::ostringstream m;
+  m << labelsName << ": the intraoperative image covers too little of the brain to match its surface: "
+    << int(std::lround(100 * share)) << " % of the brain surface nodes (" << r.coveredSurfaceNodes << " of " << r.surfaceNodes
+    << ") and " << std::lround(r.coveredBrainMl) << " ml of the " << std::lround(r.meshedBrainMl)
+    << " ml brain lie inside its field of view after the rigid transform (at least "
+    << int(std::lround(100 * p.minimumCoveredSurfaceShare)) << " % and " << std::lround(p.minimumCoveredBrainMl) << " ml are needed)";
+  throw InputError(m.str());
+}
+
 double mean(const std::vector<double>& values)
 {
   double sum = 0;
@@ -525,8 +569,13 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
   };
   auto computeForces = [&]() {
     for (Eigen::Index i = 0; i < n; ++i) {
-      if (freeReason[std::size_t(i)] == 1 || freeReason[std::size_t(i)] == 2) {
+      if (freeReason[std::size_t(i)] == ResectedTumour || freeReason[std::size_t(i)] == OutsideImage) {
         force.row(i).setZero();
+        continue;
+      }
+      if (freeReason[std::size_t(i)] == HeldOutsideImage) { // back to rest: the skull holds it
+        const double length = v.row(i).norm();
+        force.row(i) = length > p.maximumStepMm ? Eigen::RowVector3d(-v.row(i) * (p.maximumStepMm / length)) : Eigen::RowVector3d(-v.row(i));
         continue;
       }
       bool image = false;
@@ -846,21 +895,20 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
   std::vector<Vec> indices(n);
   for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
-  std::size_t outside = 0;
+  // -- What the field of view covers (a slab covers part of the brain): the nodes outside it are
+  //    left to the elastic model, or held at rest.
   for (std::size_t i = 0; i < n; ++i) {
     const vtkIdType node = vtkIdType(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)));
-    if (result.tumourResected && tumourNodes.count(node)) freeReason[i] = 1;
+    if (result.tumourResected && tumourNodes.count(node)) freeReason[i] = ResectedTumour;
     if (!TrilinearVolume::insideGrid(toFullIndex(x0[i]), grid)) {
-      freeReason[i] = 2;
-      ++outside;
+      freeReason[i] = p.holdOutsideFieldOfView ? HeldOutsideImage : OutsideImage;
+    } else {
+      ++result.coveredSurfaceNodes;
     }
   }
-  if (outside > n / 2) {
-    std::ostringstream m;
-    m << names.labels << ": the brain surface does not overlap the intraoperative image (" << outside << " of " << n
-      << " surface nodes fall outside it after the rigid transform)";
-    throw InputError(m.str());
-  }
+  result.surfaceNodes = n;
+  result.coveredBrainMl = coveredBrainVolumeMl(mesh, cellLabels, meshedBrain, toFullIndex, grid, result.meshedBrainMl);
+  requireEnoughCoverage(result, p, names.labels);
   const itk::ImageRegion<3> region = regionAround(grid, indices, CropMarginMm);
   const LabelImage::Pointer labelsAround = cropped(intraopLabels, region);
   const MaskImage::Pointer mask = targetBrainMask(*labelsAround, brain, names.labels, result.warnings);
@@ -929,17 +977,18 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
       before.push_back(initialResiduals[i]);
       result.imageTermNodes += fit.imageUsed[i];
       break;
-    case 1: ++result.freeResected; break;
-    case 2: ++result.freeOutsideImage; break;
+    case ResectedTumour: ++result.freeResected; break;
+    case OutsideImage: ++result.freeOutsideImage; break;
+    case HeldOutsideImage: ++result.heldOutsideImage; break;
     default: ++result.freeUnmatched; break;
     }
   }
-  result.surfaceNodes = n;
-  result.imposedNodes = residuals.size();
-  if (result.imposedNodes < n / 2) {
+  result.imposedNodes = residuals.size() + result.heldOutsideImage;
+  if (residuals.size() < result.coveredSurfaceNodes / 2) {
     std::ostringstream m;
-    m << "surface: only " << result.imposedNodes << " of " << n
-      << " brain surface nodes found the intraoperative brain boundary; the segmentation does not match the preoperative brain";
+    m << "surface: only " << residuals.size() << " of the " << result.coveredSurfaceNodes
+      << " brain surface nodes inside the intraoperative image found its brain boundary; the segmentation does not match "
+         "the preoperative brain";
     throw MethodError(m.str());
   }
   if (result.freeUnmatched > 0) {
@@ -956,7 +1005,13 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   if (p.snapToBoundary) {
     result.unsnappedNodes = snapOntoBoundary(fit, along.targets, preopBoundary, topology.triangles, freeReason, p);
   }
-  const Eigen::MatrixXd u = fit.positions - preopBoundary;
+  Eigen::MatrixXd u = fit.positions - preopBoundary;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (freeReason[i] == HeldOutsideImage) {
+      u.row(Eigen::Index(i)).setZero();
+      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
+    }
+  }
   std::vector<Vec> from(n), to(n);
   for (std::size_t i = 0; i < n; ++i) {
     from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
@@ -991,7 +1046,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
     magnitude->InsertNextValue(d.norm());
     magnitudes.push_back(d.norm());
     nodeIds->InsertNextValue(int(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))));
-    imposed->InsertNextValue(freeReason[i] == 0 ? 1 : 0);
+    imposed->InsertNextValue(freeReason[i] == Matched || freeReason[i] == HeldOutsideImage ? 1 : 0);
   }
   result.meanDisplacementMm = mean(magnitudes);
   result.maxDisplacementMm = *std::max_element(magnitudes.begin(), magnitudes.end());

@@ -29,8 +29,9 @@
 //
 // Nodes without a counterpart are left free (Imposed 0) for the solve rather than imposed wrongly:
 // nodes of a tumour that has been resected (its surface has become a cavity's wall), nodes whose
-// intraoperative position falls outside the intraoperative image, and nodes that end farther than
-// `unmatchedResidualMm` from the target boundary.
+// intraoperative position falls outside the intraoperative image (a slab field of view; or held at
+// rest, `holdOutsideFieldOfView`), and nodes that end farther than `unmatchedResidualMm` from the
+// target boundary.
 #include "BrainShiftErrors.h"
 #include "ImageTypes.h"
 #include "TransformIO.h"
@@ -80,6 +81,14 @@ struct ActiveSurfaceParameters {
   /// Put each matched node on the boundary at the end (snapOntoBoundary in the .cxx) rather than
   /// where the membrane's equilibrium leaves it, short of the boundary.
   bool snapToBoundary = false;
+  /// A partial field of view (a slab around the craniotomy): the surface nodes it does not cover
+  /// are left free for the elastic model (false), or held at rest where the skull holds them (true:
+  /// imposed, zero displacement).
+  bool holdOutsideFieldOfView = true;
+  /// Too little of the brain seen to say anything: fewer surface nodes than this share, or less
+  /// brain than this volume, inside the intraoperative field of view (InputError naming both).
+  double minimumCoveredSurfaceShare = 0.15;
+  double minimumCoveredBrainMl = 100.0;
   std::vector<int> brainLabels{2, 3, 4}; ///< the mesh tissues whose union is the brain
   int tumourLabel = 4;
   void validate() const;
@@ -93,6 +102,11 @@ struct ActiveSurfaceResult {
   bool converged = false;
   std::size_t surfaceNodes = 0, imposedNodes = 0;
   std::size_t freeResected = 0, freeOutsideImage = 0, freeUnmatched = 0;
+  std::size_t heldOutsideImage = 0; ///< outside the field of view, held at rest (holdOutsideFieldOfView)
+  /// What the intraoperative field of view covers after the rigid transform: surface nodes, and
+  /// the meshed brain's volume (tetrahedra whose centroid it holds) against the whole.
+  std::size_t coveredSurfaceNodes = 0;
+  double coveredBrainMl = 0, meshedBrainMl = 0;
   bool tumourResected = false;
   /// Distance of the imposed nodes to the target boundary at the end (mm).
   double meanResidualMm = 0, p95ResidualMm = 0, maxResidualMm = 0;
@@ -125,7 +139,8 @@ struct ActiveSurfaceInputNames {
 /// it the mesh's own (smoothed) surface stands for the preoperative boundary.
 /// `intraopImage` (same grid as the labels) feeds the image term; null turns it off.
 /// InputError for a mesh without the brain labels or with a non-manifold brain surface, an empty
-/// target segmentation, a surface that does not overlap the intraoperative image, mismatched grids.
+/// target segmentation, an intraoperative field of view that covers too little of the brain (the
+/// shares in the message), mismatched grids.
 /// MethodError if the surface folds (triangles reversed) or most nodes find no counterpart.
 /// The result's surface carries the preoperative boundary it found as the point array
 /// "PreopBoundary" (model frame, mm). `previousSurface`, an earlier scan's result on the same mesh

@@ -379,6 +379,14 @@ Vec3 upwardDirection(const Vec3& axis, double tiltDegrees)
   return normalized(std::cos(t) * axis + std::sin(t) * perpendicular);
 }
 
+/// A slab field of view: the axial slices of the grid around `centreZ` (scanner z, mm), 75 mm in
+/// all (30 slices of 2.5 mm; 15 of 5 mm for the small case), the in-plane field unchanged.
+void cutToSlab(Grid& I, double centreZ, bool small)
+{
+  I.size[2] = small ? 15 : 30;
+  I.origin[2] = centreZ - 0.5 * I.spacing[2] * double(I.size[2] - 1);
+}
+
 /// The height (along `up`) below which `fraction` of the voxels of one matter lie.
 double fluidLevel(const Grid& g, const std::vector<unsigned char>& matter, Matter which, const Vec3& up, double fraction)
 {
@@ -514,6 +522,16 @@ GapContent gapContentFromString(const std::string& text)
   return enumFromString(text, {GapContent::Dark, GapContent::FluidAndAir}, "--gap");
 }
 
+std::string toString(FieldOfView fieldOfView)
+{
+  return fieldOfView == FieldOfView::WholeHead ? "whole-head" : "slab";
+}
+
+FieldOfView fieldOfViewFromString(const std::string& text)
+{
+  return enumFromString(text, {FieldOfView::WholeHead, FieldOfView::Slab}, "--field-of-view");
+}
+
 void CaseParameters::validate() const
 {
   auto require = [](bool ok, const std::string& message) {
@@ -537,6 +555,40 @@ void CaseParameters::validate() const
   require(std::isfinite(gravityTiltDegrees) && std::abs(gravityTiltDegrees) <= 60,
           "the gravity tilt must be within +-60 degrees");
 }
+
+namespace {
+/// Partial fields of view: the head scanned as a slab of axial slices around the craniotomy (new
+/// names and seeds; fluid and air under the craniotomy as in every hard scenario).
+void addSlabScenarios(std::vector<CaseScenario>& list)
+{
+  auto slab = [](std::uint64_t seed, CraniotomySite site, double shift, bool resection, TumourAppearance tumour,
+                 IntraopContrast contrast, double noise, double bias) {
+    CaseParameters p;
+    p.seed = seed;
+    p.craniotomy = site;
+    p.shiftMillimetres = shift;
+    p.resection = resection;
+    p.tumourAppearance = tumour;
+    p.contrast = contrast;
+    p.noiseFraction = noise;
+    p.biasStrength = bias;
+    p.gap = GapContent::FluidAndAir;
+    p.fieldOfView = FieldOfView::Slab;
+    return p;
+  };
+  const std::string slabText = "; fluid and air under the craniotomy; scanned as a slab of 30 axial slices of 2.5 mm around the craniotomy";
+  list.push_back({"rf10-slab", "right frontal, 10 mm, resection" + slabText,
+                  slab(2151, CraniotomySite::RightFrontal, 10, true, TumourAppearance::RimEnhancing, IntraopContrast::T1, 0.04, 0.2)});
+  list.push_back({"lp15-slab-intact", "left parietal, 15 mm, hypointense tumour in place" + slabText,
+                  slab(2152, CraniotomySite::LeftParietal, 15, false, TumourAppearance::Hypointense, IntraopContrast::T1, 0.05, 0.25)});
+  CaseParameters misaligned =
+    slab(2153, CraniotomySite::RightParietal, 10, true, TumourAppearance::RimEnhancing, IntraopContrast::LowFieldT1, 0.04, 0.2);
+  misaligned.rotationDegrees = {15.0, -12.0, 16.0};
+  misaligned.translationMillimetres = {20.0, -15.0, 15.0};
+  list.push_back({"rp10-slab-misaligned",
+                  "right parietal, 10 mm, resection, low-field, head 25 degrees and 29 mm from the preoperative pose" + slabText, misaligned});
+}
+} // namespace
 
 const std::vector<CaseScenario>& caseScenarios()
 {
@@ -595,6 +647,7 @@ const std::vector<CaseScenario>& caseScenarios()
       }
       list.push_back({v.name, std::string(v.description) + "; fluid and air under the craniotomy", p});
     }
+    addSlabScenarios(list);
     return list;
   }();
   return scenarios;
@@ -996,6 +1049,10 @@ SimulatedCase simulateCase(const CaseParameters& P)
     const Vec3 centre = toVec(motion->TransformPoint(toPoint(brainCentroid + Vec3{0, 0, 10})));
     for (int k = 0; k < 3; ++k) I.origin[k] = centre[k] - 0.5 * I.spacing[k] * (I.size[k] - 1);
   }
+  if (P.fieldOfView == FieldOfView::Slab) { // centred between the craniotomy and the tumour
+    const Vec3 middle = toVec(motion->TransformPoint(toPoint(0.5 * (craniotomyCentre + tumourCentre))));
+    cutToSlab(I, middle[2], small);
+  }
   const std::size_t NI = I.count();
   result.intraopImage = newImage<ScalarImage>(I, 0.0f);
   result.intraopLabels = newImage<LabelImage>(I, Background);
@@ -1062,6 +1119,12 @@ SimulatedCase simulateCase(const CaseParameters& P)
       const Vec3 source = G.pointOf(i) + sampleField(W, w, G.pointOf(i));
       if (sampleNearest<LabelPixel>(G, labels, source, Background) == Tumour) figures.cavityVolumeMl += voxelMl;
       else figures.gapVolumeMl += voxelMl;
+    }
+    if (dLabels[i] >= Parenchyma) {
+      const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(G.pointOf(i)))));
+      bool inView = true;
+      for (int k = 0; k < 3; ++k) inView = inView && c[k] >= -0.5 && c[k] <= double(I.size[k]) - 0.5;
+      if (inView) figures.brainInFieldOfViewMl += voxelMl;
     }
     if (dLabels[i] >= Parenchyma) figures.maxBrainDisplacementMm = std::max(figures.maxBrainDisplacementMm, norm(sampleField(W, w, G.pointOf(i))));
   }
@@ -1206,6 +1269,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"gravity_tilt_degrees", P.gravityTiltDegrees},
       {"cavity_rim", P.cavityRim},
       {"truth", toString(P.truth)},
+      {"field_of_view", toString(P.fieldOfView)},
       {"template", (P.templateFolder / "ch2.nii.gz").string()}}},
     {"figures",
      {{"craniotomy_centre_lps", point(f.craniotomyCentre)},
@@ -1226,7 +1290,14 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"truth_quadratic_elements", f.truthElements},
       {"truth_folded_elements", f.truthFoldedElements},
       {"truth_solver_seconds", f.truthSolverSeconds},
+      {"brain_in_field_of_view_ml", f.brainInFieldOfViewMl},
+      {"intraop_grid_size", nlohmann::json::array({simulated.intraopImage->GetLargestPossibleRegion().GetSize()[0],
+                                                    simulated.intraopImage->GetLargestPossibleRegion().GetSize()[1],
+                                                    simulated.intraopImage->GetLargestPossibleRegion().GetSize()[2]})},
       {"landmarks", simulated.landmarks.size()}}},
+    {"landmarks",
+     "chosen inside the intraoperative field of view only, at least 8 mm from its edges (a pair is one point seen in "
+     "both images; with a slab, the brain outside it has none)"},
     {"files",
      {{"preop_image", "preop_image.nii.gz"},
       {"preop_labels", "preop_labels.nii.gz"},

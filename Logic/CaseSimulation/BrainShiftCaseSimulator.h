@@ -56,6 +56,11 @@ enum class GapContent {
   Dark,        ///< one dark value (0.6 of CSF), the default
   FluidAndAir  ///< CSF-like fluid with an air-fluid level set by gravity: air above, fluid below
 };
+/// What the intraoperative scan covers: the whole head (the default), or a slab of axial slices
+/// around the craniotomy (30 slices of 2.5 mm, 15 of 5 mm for the small case: 75 mm), centred
+/// between the craniotomy and the tumour so that both are inside; the rest of the head is not scanned.
+enum class FieldOfView { WholeHead, Slab };
+
 struct CaseParameters {
   CaseSize size = CaseSize::Full;
   std::uint64_t seed = 2000;
@@ -77,6 +82,7 @@ struct CaseParameters {
   /// A bright rim (blood products, 1.5 mm) on the wall of the resection cavity.
   bool cavityRim = false;
   TruthModel truth = TruthModel::Kinematic;
+  FieldOfView fieldOfView = FieldOfView::WholeHead;
   std::filesystem::path templateFolder = "/usr/share/mricron/templates";
 
   /// InputError naming the option for values outside what the model means.
@@ -94,6 +100,8 @@ std::string toString(TruthModel truth);            ///< "kinematic", "finite-ele
 TruthModel truthModelFromString(const std::string& text);
 std::string toString(GapContent gap);              ///< "dark", "fluid-and-air"
 GapContent gapContentFromString(const std::string& text);
+std::string toString(FieldOfView fieldOfView);     ///< "whole-head", "slab"
+FieldOfView fieldOfViewFromString(const std::string& text);
 
 /// A named variant of the built-in case: the hard scenarios that real surgery brings (fluid and
 /// air under the craniotomy, another scanner's contrast, tumours resected or not and of every
@@ -119,6 +127,7 @@ struct CaseFigures {
   double gapVolumeMl = 0;             ///< the gap between skull and sunken brain
   double gapAirMl = 0, cavityAirMl = 0; ///< of which air (FluidAndAir)
   double cavityVolumeMl = 0;
+  double brainInFieldOfViewMl = 0;    ///< of the deformed brain, inside the intraoperative grid
   double minJacobianDeterminant = 0;  ///< of x' -> x' + w(x') over the brain; > 0: no folding
   double decayLengthMm = 0, lateralSigmaMm = 0;
   /// The finite element truth: nodes, quadratic elements, CalculiX's seconds, folded elements.

@@ -165,9 +165,10 @@ Configuration Configuration::load(const fs::path& path)
     const json& c = document["surface"];
     if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
     requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
-                         "snap_to_boundary"}, file + ": surface");
+                         "snap_to_boundary", "hold_outside_field_of_view"}, file + ": surface");
     for (const auto& [key, target] : {std::pair<const char*, bool*>{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
-                                      {"snap_to_boundary", &configuration.surfaceSnapToBoundary}}) {
+                                      {"snap_to_boundary", &configuration.surfaceSnapToBoundary},
+                                      {"hold_outside_field_of_view", &configuration.surfaceHoldOutsideFieldOfView}}) {
       if (!c.contains(key)) continue;
       if (!c[key].is_boolean()) throw InputError(file + ": surface." + key + " must be true or false");
       *target = c[key].get<bool>();

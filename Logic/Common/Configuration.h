@@ -65,6 +65,8 @@ struct Configuration {
   /// matched nodes put on the boundary at the end (ActiveSurfaceLogic.h).
   bool surfaceMatchAlongSinkingDirection = true;
   bool surfaceSnapToBoundary = false;
+  /// Surface nodes outside the intraoperative field of view: held at rest (true) or left free.
+  bool surfaceHoldOutsideFieldOfView = true;
   /// Block matching inside the brain (Logic/BlockMatching) and its matches as soft constraints of
   /// the solve, rejected in rounds (FiniteElementJob.h): "block_matching" in the file.
   struct BlockMatching {

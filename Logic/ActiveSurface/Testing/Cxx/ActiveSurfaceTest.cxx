@@ -247,6 +247,72 @@ void resectedTumourIsFree()
   BS_CHECK(intact.imposedNodes == intact.surfaceNodes);
 }
 
+/// An axial slab through the sphere's middle (`slices` of 2.5 mm) as the intraoperative grid.
+ImageGeometry slabGrid(std::size_t slices)
+{
+  const double halfThickness = 0.5 * 2.5 * double(slices - 1);
+  return brainshift::testing::grid({{96, 96, slices}}, {1.25, 1.25, 2.5}, point(-55, -62, sphereCentre[2] - halfThickness));
+}
+
+/// A partial field of view: a slab 27.5 mm thick through a sphere of 35 mm that shrinks by 3 mm.
+/// The nodes it covers move onto the target; the others are held at rest (imposed, zero
+/// displacement) or, when asked, left free; a slab of two slices covers too little to say anything.
+void slabFieldOfView()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  MeshingParameters meshing;
+  meshing.resolutionMm = 3.0;
+  meshing.labels = {2};
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  auto identity = itk::Euler3DTransform<double>::New();
+  const auto slab = sphereLabels(slabGrid(12), 32.0, nullptr, false, false);
+  const ActiveSurfaceResult held = deformBrainSurface(mesh.mesh, preop.GetPointer(), *slab, intensityOf(*slab).GetPointer(), *identity,
+                                                      ActiveSurfaceParameters{});
+  const double share = double(held.coveredSurfaceNodes) / double(held.surfaceNodes);
+  std::cout << "slab: " << held.coveredSurfaceNodes << " of " << held.surfaceNodes << " nodes inside (" << share << "), "
+            << held.coveredBrainMl << " of " << held.meshedBrainMl << " ml, residual " << held.meanResidualMm << " mm\n";
+  BS_CHECK_MSG(share > 0.3 && share < 0.5, share); // a sphere's zone of height h holds h / 2R of its area: 0.39
+  BS_CHECK(held.heldOutsideImage + held.coveredSurfaceNodes == held.surfaceNodes && held.freeOutsideImage == 0);
+  BS_CHECK_MSG(held.coveredBrainMl > 0.3 * held.meshedBrainMl && held.coveredBrainMl < 0.7 * held.meshedBrainMl, held.coveredBrainMl);
+  BS_CHECK_MSG(held.meanResidualMm < 0.5, held.meanResidualMm);
+  vtkPolyData* s = held.surface;
+  vtkDataArray* displacement = s->GetPointData()->GetArray("Displacement");
+  vtkDataArray* imposed = s->GetPointData()->GetArray("Imposed");
+  double inwardSum = 0;
+  std::size_t inwardCount = 0, heldMoving = 0, heldFree = 0;
+  for (vtkIdType i = 0; i < s->GetNumberOfPoints(); ++i) {
+    double x[3], u[3];
+    s->GetPoint(i, x);
+    displacement->GetTuple(i, u);
+    const double z = x[2] - u[2] - sphereCentre[2], length = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    if (std::abs(z) > 16.0) { // beyond the slab's faces (13.75 mm) and the mesh's step
+      heldMoving += length > 0;
+      heldFree += imposed->GetComponent(i, 0) < 0.5;
+    } else if (std::abs(z) < 8.0) {
+      inwardSum += length;
+      ++inwardCount;
+    }
+  }
+  BS_CHECK(heldMoving == 0 && heldFree == 0);
+  BS_CHECK_MSG(inwardCount > 100 && std::abs(inwardSum / double(inwardCount) - 3.0) < 0.6, inwardSum / double(inwardCount));
+  // Left free instead: the same nodes, Imposed 0.
+  ActiveSurfaceParameters free;
+  free.holdOutsideFieldOfView = false;
+  const ActiveSurfaceResult freed = deformBrainSurface(mesh.mesh, preop.GetPointer(), *slab, nullptr, *identity, free);
+  BS_CHECK(freed.freeOutsideImage == held.heldOutsideImage && freed.heldOutsideImage == 0);
+  BS_CHECK(freed.imposedNodes + freed.freeOutsideImage + freed.freeUnmatched == freed.surfaceNodes);
+  // Two slices: about 7 % of the surface; refused with the figures.
+  const auto thin = sphereLabels(slabGrid(2), 32.0, nullptr, false, false);
+  BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *thin, nullptr, *identity, ActiveSurfaceParameters{}), InputError,
+                  "covers too little of the brain to match its surface");
+  try {
+    deformBrainSurface(mesh.mesh, preop.GetPointer(), *thin, nullptr, *identity, ActiveSurfaceParameters{});
+  } catch (const InputError& e) {
+    std::cout << "thin slab: " << e.what() << "\n";
+    BS_CHECK_MSG(std::string(e.what()).find("% of the brain surface nodes") != std::string::npos, e.what());
+  }
+}
+
 void smallCaseAgainstTruth()
 {
   CaseParameters parameters;
@@ -323,7 +389,7 @@ void badInput()
   translation.Fill(500.0);
   far->SetTranslation(translation);
   BS_CHECK_THROWS(deformBrainSurface(mesh.mesh, preop.GetPointer(), *preop, nullptr, *far, parameters, names), InputError,
-                  "does not overlap the intraoperative image");
+                  "covers too little of the brain");
 
   // Labels and image on different grids.
   const auto otherGrid = intensityOf(*sphereLabels(intraopGrid(), 30.0, nullptr, false, false));
@@ -359,6 +425,7 @@ int ActiveSurfaceTest(int, char*[])
     sphereShrinks();
     imageGuardsAgainstAWrongSegmentation();
     resectedTumourIsFree();
+    slabFieldOfView();
     badInput();
     smallCaseAgainstTruth();
   });
