@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <thread>
 #include <iostream>
+#include <unistd.h>
 
 int FiniteElementSessionTest(int, char*[])
 {
@@ -119,9 +120,12 @@ int FiniteElementSessionTest(int, char*[])
     }
 
     // A served worker that dies between scans is reported, and the caller survives (no SIGPIPE).
-    // Only this test serves workers, so the kill touches no other test's process.
-    FiniteElementSession doomed(job, testing::workerOptions(1));
-    BS_CHECK(std::system("pkill -KILL -f '[b]rainshift-fe-worker --serve' >/dev/null 2>&1") == 0);
+    // The kill names this session's own job file: other tests and stages serve workers too.
+    FiniteElementRunOptions doomedOptions = testing::workerOptions(1);
+    doomedOptions.workFolder = testing::temporaryFolder("FiniteElementSessionTest") / ("doomed-" + std::to_string(::getpid()));
+    FiniteElementSession doomed(job, doomedOptions);
+    const std::string kill = "pkill -KILL -f '[b]rainshift-fe-worker --serve " + (doomedOptions.workFolder / "").string() + "' >/dev/null 2>&1";
+    BS_CHECK(std::system(kill.c_str()) == 0);
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     BS_CHECK_THROWS(doomed.solve(job.fixedDisplacements), MethodError, "finite element worker");
   });
