@@ -96,97 +96,6 @@ double rmsMisfit(const FiniteElementJob& job, const std::vector<SoftConstraint>&
   return std::sqrt(sum / double(constraints.size()));
 }
 
-/// The imposed surface nodes that moved at least `softAboveMm` leave the fixed nodes and become
-/// soft constraints (isotropic, `stiffness`) appended to `job`'s: the segmentation's surface is
-/// then evidence beside the matches, and where the two disagree the rejection weighs them. At least
-/// a tenth of the imposed nodes (those that moved least) stay fixed. Returns how many went soft.
-std::size_t softenMovedSurface(FiniteElementJob& job, double softAboveMm, double stiffness)
-{
-  if (softAboveMm <= 0) return 0;
-  std::vector<std::int32_t> tetrahedronOfNode(job.nodeCount(), -1);
-  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
-    for (int k = 0; k < 4; ++k) {
-      std::int32_t& owner = tetrahedronOfNode[std::size_t(job.tetrahedra[4 * t + std::size_t(k)])];
-      if (owner < 0) owner = std::int32_t(t);
-    }
-  }
-  std::vector<std::pair<double, std::size_t>> moved; // |u|, index into the fixed nodes
-  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-    const double* u = &job.fixedDisplacements[3 * f];
-    moved.push_back({std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]), f});
-  }
-  std::sort(moved.begin(), moved.end());
-  const std::size_t keepFixed = std::max<std::size_t>(1, moved.size() / 10);
-  std::vector<char> soft(job.fixedNodes.size(), 0);
-  std::size_t softened = 0;
-  for (std::size_t i = keepFixed; i < moved.size(); ++i) {
-    if (moved[i].first < softAboveMm) continue;
-    const std::size_t f = moved[i].second;
-    const std::int32_t node = job.fixedNodes[f], t = tetrahedronOfNode[std::size_t(node)];
-    if (t < 0) continue;
-    SoftConstraint c;
-    c.tetrahedron = t;
-    for (int k = 0; k < 4; ++k) c.weights[std::size_t(k)] = job.tetrahedra[4 * std::size_t(t) + std::size_t(k)] == node ? 1.0 : 0.0;
-    c.target = {job.fixedDisplacements[3 * f], job.fixedDisplacements[3 * f + 1], job.fixedDisplacements[3 * f + 2]};
-    c.stiffness = {stiffness, 0, 0, stiffness, 0, stiffness};
-    job.softConstraints.push_back(c);
-    soft[f] = 1;
-    ++softened;
-  }
-  std::vector<std::int32_t> nodes;
-  std::vector<double> values;
-  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-    if (soft[f]) continue;
-    nodes.push_back(job.fixedNodes[f]);
-    values.insert(values.end(), job.fixedDisplacements.begin() + std::ptrdiff_t(3 * f), job.fixedDisplacements.begin() + std::ptrdiff_t(3 * f + 3));
-  }
-  job.fixedNodes = nodes;
-  job.fixedDisplacements = values;
-  return softened;
-}
-
-/// The imposed nodes the image contradicts: at least 3 rejected matches (similarity >= 0.8) within
-/// `reachMm`, whose residuals u(p) - target agree in direction (their mean at least 0.7 of their
-/// mean length) and reach 2 mm. Returns indices into `job.fixedNodes`.
-std::vector<std::size_t> contradictedSurfaceNodes(const FiniteElementJob& job, const std::vector<BlockMatch>& matches,
-                                                  const ImageMatchConstraints& constraints, std::size_t matchConstraints,
-                                                  const FiniteElementResult& result, double reachMm)
-{
-  struct Residual {
-    std::array<double, 3> at, r;
-  };
-  std::vector<Residual> rejected;
-  for (std::size_t c = 0; c < matchConstraints && c < result.softConstraintKept.size(); ++c) {
-    const BlockMatch& m = matches[constraints.matchOfConstraint[c]];
-    if (result.softConstraintKept[c] || m.similarity < 0.8) continue;
-    const SoftConstraint& s = constraints.constraints[c];
-    Residual residual{{m.centre[0], m.centre[1], m.centre[2]}, {-s.target[0], -s.target[1], -s.target[2]}};
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t node = std::size_t(job.tetrahedra[4 * std::size_t(s.tetrahedron) + std::size_t(k)]);
-      for (int d = 0; d < 3; ++d) residual.r[std::size_t(d)] += s.weights[std::size_t(k)] * result.displacements[3 * node + std::size_t(d)];
-    }
-    rejected.push_back(residual);
-  }
-  std::vector<std::size_t> contradicted;
-  for (std::size_t f = 0; f < job.fixedNodes.size(); ++f) {
-    const double* x = &job.nodes[3 * std::size_t(job.fixedNodes[f])];
-    std::array<double, 3> sum{0, 0, 0};
-    double lengths = 0;
-    int count = 0;
-    for (const Residual& residual : rejected) {
-      const double d2 = std::pow(x[0] - residual.at[0], 2) + std::pow(x[1] - residual.at[1], 2) + std::pow(x[2] - residual.at[2], 2);
-      if (d2 > reachMm * reachMm) continue;
-      for (int a = 0; a < 3; ++a) sum[std::size_t(a)] += residual.r[std::size_t(a)];
-      lengths += std::sqrt(residual.r[0] * residual.r[0] + residual.r[1] * residual.r[1] + residual.r[2] * residual.r[2]);
-      ++count;
-    }
-    if (count < 3) continue;
-    const double mean = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]) / count;
-    if (mean >= 2.0 && mean >= 0.7 * lengths / count) contradicted.push_back(f);
-  }
-  return contradicted;
-}
-
 } // namespace
 
 std::optional<std::string> imageMatchingUnavailable(RunContext& context)
@@ -253,35 +162,9 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   constrained.softConstraints = constraints.constraints;
   constrained.rejection = rejectionFrom(configuration);
   const std::size_t matchConstraints = constrained.softConstraints.size();
-  const std::size_t softSurface = softenMovedSurface(constrained, configuration.blockMatching.surfaceSoftAboveMm,
-                                                     configuration.blockMatching.surfaceStiffnessNPerMm);
-  FiniteElementResult result = solve(constrained);
-  const double reach = configuration.blockMatching.freeContradictedSurfaceReachMm;
-  std::size_t freed = 0;
-  if (reach > 0) {
-    const std::vector<std::size_t> contradicted = contradictedSurfaceNodes(constrained, matching.matches, constraints, matchConstraints, result, reach);
-    // Freed, the nodes follow the elastic model and the matches beneath them; a few fixed nodes must stay.
-    if (!contradicted.empty() && contradicted.size() < constrained.fixedNodes.size() / 2) {
-      std::vector<char> free(constrained.fixedNodes.size(), 0);
-      for (std::size_t f : contradicted) free[f] = 1;
-      FiniteElementJob second = constrained;
-      second.fixedNodes.clear();
-      second.fixedDisplacements.clear();
-      for (std::size_t f = 0; f < constrained.fixedNodes.size(); ++f) {
-        if (free[f]) continue;
-        second.fixedNodes.push_back(constrained.fixedNodes[f]);
-        second.fixedDisplacements.insert(second.fixedDisplacements.end(), constrained.fixedDisplacements.begin() + std::ptrdiff_t(3 * f),
-                                         constrained.fixedDisplacements.begin() + std::ptrdiff_t(3 * f + 3));
-      }
-      result = solve(second);
-      freed = contradicted.size();
-    }
-  }
-  entry["surface_nodes_freed"] = freed;
-  std::size_t kept = 0, surfaceKept = 0;
-  for (std::size_t i = 0; i < result.softConstraintKept.size(); ++i) (i < matchConstraints ? kept : surfaceKept) += result.softConstraintKept[i];
-  entry["surface_soft_nodes"] = softSurface;
-  entry["surface_soft_kept"] = surfaceKept;
+  const FiniteElementResult result = solve(constrained);
+  std::size_t kept = 0;
+  for (std::uint8_t k : result.softConstraintKept) kept += k;
   double change = 0;
   for (std::size_t i = 0; i + 2 < result.displacements.size(); i += 3) {
     change += std::sqrt(std::pow(result.displacements[i] - surfaceOnly.displacements[i], 2) +

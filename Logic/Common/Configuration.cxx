@@ -191,9 +191,7 @@ Configuration Configuration::load(const fs::path& path)
       {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
       {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
       {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
-      {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm},
-      {"surface_soft_above_mm", &b.surfaceSoftAboveMm}, {"surface_stiffness_n_per_mm", &b.surfaceStiffnessNPerMm},
-      {"free_contradicted_surface_reach_mm", &b.freeContradictedSurfaceReachMm}};
+      {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
     std::set<std::string> keys{"enabled"};
     for (const auto& [key, target] : numbers) keys.insert(key);
     requireKnownKeys(c, keys, file + ": block_matching");
@@ -362,9 +360,6 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("rejection_fraction", b.rejectionFraction, 0, 1);
   within("outlier_factor", b.outlierFactor, 0, 100);
   within("rejection_floor_mm", b.rejectionFloorMm, 0, 100);
-  within("surface_soft_above_mm", b.surfaceSoftAboveMm, 0, 100);
-  within("surface_stiffness_n_per_mm", b.surfaceStiffnessNPerMm, 0, 100);
-  within("free_contradicted_surface_reach_mm", b.freeContradictedSurfaceReachMm, 0, 50);
 }
 
 } // namespace brainshift

@@ -75,15 +75,6 @@ struct Configuration {
     double maximumBlocks = 1500;
     double stiffnessNPerMm = 0.01;  ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 2.5, rejectionFloorMm = 1.0;
-    /// The surface's imposed nodes that moved at least this far become soft constraints of this
-    /// stiffness (the segmentation's surface is evidence like the matches, and the rejection
-    /// weighs them together); the others stay fixed. 0: every imposed node stays fixed.
-    double surfaceSoftAboveMm = 0.0, surfaceStiffnessNPerMm = 0.01;
-    /// Where the matches the robust solve rejected agree among themselves and against the surface
-    /// (at least 3 within this reach of an imposed node, similar >= 0.8, their misfits pointing the same
-    /// way, 2 mm and more), the segmentation's surface is what is wrong: those nodes are freed and
-    /// the matches solved again. 0: never.
-    double freeContradictedSurfaceReachMm = 0.0;
   } blockMatching;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,

@@ -8,6 +8,7 @@
 #
 #   Testing/Benchmarks/blockmatching/run.sh [OUTPUT_DIR [SCENARIO...]]
 #
+# Runs of other scenarios left in OUTPUT_DIR/runs by an earlier call are reported with these.
 # OUTPUT_DIR defaults to Testing/Benchmarks/results/blockmatching; the scenarios default to
 # default rf20-lowfield lf20-intact-hypointense lp15-fe-sliding-intact. Writes OUTPUT_DIR/machine.txt,
 # settings.csv, summary.md and tre_vs_time.png (the Pareto front of each scenario marked).
@@ -24,7 +25,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 ensure_matplotlib
 require_brainshift
-prepare_output machine.txt settings.csv summary.md tre_vs_time.png runs/
+prepare_output machine.txt settings.csv summary.md tre_vs_time.png # runs/<scenario> are replaced one by one
 write_machine_description
 mkdir -p "$out/runs/configs"
 
@@ -49,6 +50,7 @@ done
 
 for scenario in "${scenarios[@]}"; do
   folder=$out/runs/$scenario
+  rm -rf "$folder"
   mkdir -p "$folder"
   run_logged "$folder/surface-only.log" "$brainshift" demo --scenario "$scenario" --output-dir "$folder/surface-only" \
     --config "$out/runs/configs/surface-only.json"
@@ -60,6 +62,7 @@ for scenario in "${scenarios[@]}"; do
       --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
       --overlay "fmri=$case_dir/preop_fmri.nii.gz" --output-dir "$folder/$name" --config "$out/runs/configs/$name.json" \
       > "$folder/$name.log" 2>&1 || say "$scenario/$name: exit $? (see $folder/$name.log)"
+    [ -f "$folder/$name/intraop_to_preop.h5" ] || continue
     run_logged "$folder/$name.evaluate.log" "$brainshift" evaluate --transform "$folder/$name/intraop_to_preop.h5" \
       --landmarks "$case_dir/landmarks.csv" --json "$folder/$name/evaluation-landmarks.json"
   done
