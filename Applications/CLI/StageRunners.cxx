@@ -103,12 +103,23 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
   return {{"decided_by", e.decidedBy},
           {"tumour_median", finite(e.tumourMedian)},
           {"fluid_median", finite(e.fluidMedian)},
+          {"air_median", finite(e.airMedian)},
           {"parenchyma_median", finite(e.parenchymaMedian)},
           {"intraop_relative", finite(e.intraopRelative)},
           {"preop_relative", finite(e.preopRelative)},
           {"fluid_like_share", e.fluidLikeShare},
           {"tumour_like_share", e.tumourLikeShare},
           {"parenchyma_like_share", e.parenchymaLikeShare}};
+}
+
+/// What the prototypes learned of this scan's contrast (0-100 scale), and its fluid's side.
+nlohmann::json scanContrastJson(const ScanContrast& c)
+{
+  auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  return {{"air_median", finite(c.air)},
+          {"fluid_median", finite(c.fluid)},
+          {"parenchyma_median", finite(c.parenchyma)},
+          {"fluid", c.fluidBrighterThanParenchyma() ? "brighter than the parenchyma" : "darker than the parenchyma"}};
 }
 } // namespace
 
@@ -179,6 +190,7 @@ void runClassifyStage(RunContext& context)
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
                                          {"tumour_evidence", tumourEvidenceJson(result.tumourEvidence)},
+                                         {"contrast", scanContrastJson(result.contrast)},
                                          {"relabelled_where_moved", relabelled},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
                                                          : std::string("preoperative labels through the rigid transform")},
@@ -422,6 +434,8 @@ void runSurfaceStage(RunContext& context)
                                         {"image_term_nodes", result.imageTermNodes},
                                         {"expected_intensity_inside", result.expectedInsideIntensity},
                                         {"expected_intensity_outside", result.expectedOutsideIntensity},
+                                        {"outside_brighter_share", result.outsideBrighterShare},
+                                        {"outside_sides", result.outsideSides},
                                         {"tumour_resected", result.tumourResected},
                                         {"flipped_triangles", result.flippedTriangles},
                                         {"sinking_direction", result.sinkingDirection},
