@@ -66,7 +66,7 @@ struct ActiveSurfaceParameters {
   /// The brain's surroundings are two-sided (darker and brighter than the brain: T2's bright fluid
   /// beside dark bone and air) when at least this share of the band outside the segmentation's
   /// boundary lies on each side of the band inside; else one-sided (T1, FLAIR), as it always was.
-  double twoSidedMinimumShare = 0.2;
+  double twoSidedMinimumShare = 0.1;
   double imageSearchMm = 3.0;        ///< the image term looks this far along the normal, both ways
   double imageTrustMm = 1.5;         ///< and is used only where it agrees with the segmentation this well
   double unmatchedResidualMm = 2.0;  ///< a node ending farther than this from the target is left free
