@@ -108,6 +108,7 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
           {"intraop_relative", finite(e.intraopRelative)},
           {"preop_relative", finite(e.preopRelative)},
           {"fluid_like_share", e.fluidLikeShare},
+          {"air_like_share", e.airLikeShare},
           {"tumour_like_share", e.tumourLikeShare},
           {"parenchyma_like_share", e.parenchymaLikeShare}};
 }

@@ -56,6 +56,7 @@ struct TumourResectionEvidence {
   double airMedian = std::numeric_limits<double>::quiet_NaN(); ///< the background's prototypes: air
   double intraopRelative = 0, preopRelative = 0;
   double fluidLikeShare = 0, tumourLikeShare = 0, parenchymaLikeShare = 0;
+  double airLikeShare = 0; ///< of the fluid-like share, those nearer the air than the fluid
   std::string decidedBy; ///< "image" or "user"; empty without a tumour
 };
 

@@ -58,7 +58,7 @@ int TissueClassificationContrastTest(int, char*[])
       const ScanContrast& learned = result.contrast;
       const TumourResectionEvidence& e = result.tumourEvidence;
       std::cout << (resection ? "resected" : "in place") << ": air " << learned.air << ", fluid " << learned.fluid
-                << ", parenchyma " << learned.parenchyma << "; fluid-like " << e.fluidLikeShare << ", tumour-like "
+                << ", parenchyma " << learned.parenchyma << "; fluid-like " << e.fluidLikeShare << " (air " << e.airLikeShare << "), tumour-like "
                 << e.tumourLikeShare << "\n";
       BS_CHECK(learned.fluidBrighterThanParenchyma());
       BS_CHECK(learned.air < learned.parenchyma);
