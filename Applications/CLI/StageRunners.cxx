@@ -558,13 +558,16 @@ NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImag
 nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds)
 {
   auto region = [](const RegionSimilarity& s) {
-    return nlohmann::json{{"voxels", s.voxels}, {"update", s.nonrigid}, {"rigid", s.rigid}, {"gain", s.gain()}};
+    return nlohmann::json{{"voxels", s.voxels}, {"update", s.nonrigid}, {"rigid", s.rigid}, {"gain", s.gain()},
+                          {"given", s.preoperativeGivenIntraoperative ? "intraoperative" : "preoperative"}};
   };
   const NonrigidUpdateTrustParameters p;
   return {{"nonrigid", trustName(a.trust)},
           {"rigid_fallback", a.trust == UpdateTrust::Rejected},
           {"reasons", a.reasons},
-          {"similarity", "correlation ratio eta^2 of the intraoperative image given the warped preoperative image"},
+          {"similarity", "correlation ratio eta^2 of the intraoperative image given the warped preoperative image, or of the "
+                         "warped preoperative image given the intraoperative one where the update gains more that way "
+                         "(each region's \"given\")"},
           {"near_boundary", region(a.band)},
           {"interior", region(a.interior)},
           {"moved", region(a.moved)},
