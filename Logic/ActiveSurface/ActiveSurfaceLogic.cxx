@@ -932,14 +932,22 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
     const ScalarImage::Pointer imageAround = cropped(*intraopImage, region);
     const float* d = distance->GetBufferPointer();
     const float* v = imageAround->GetBufferPointer();
-    std::vector<double> inside, outsideBand;
+    const LabelPixel* l = labelsAround->GetBufferPointer();
+    std::vector<double> inside, outsideBand, fluid, parenchyma;
     for (std::size_t i = 0, count = cropGrid.numberOfVoxels(); i < count; ++i) {
       if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
       else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
+      if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
+      else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
     }
     result.expectedInsideIntensity = median(inside);
     result.expectedOutsideIntensity = median(outsideBand);
-    edges->sides = outsideSides(inside, outsideBand, p.twoSidedMinimumShare, result.outsideBrighterShare);
+    // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
+    // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
+    // for the image term to catch, not a second side.
+    result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
+    edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
+                                result.outsideBrighterShare);
     result.outsideSides = edges->sides.size();
     edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
     edges->keepAlive = imageAround;
