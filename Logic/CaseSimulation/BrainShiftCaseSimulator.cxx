@@ -424,15 +424,15 @@ void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3
   }
 }
 
-/// T1 after gadolinium: what takes up the agent enhances strongly (1.5 of the white matter before
-/// the T1 map): the rim of a tumour left in place (its outer 2 mm), the brain tissue lining a
-/// resection cavity (1.5 mm) and the dura around the craniotomy's edge (2.5 mm outside the
+/// T1 after gadolinium: what takes up the agent enhances strongly (1.6 of the white matter before
+/// the T1 map): the rim of a tumour left in place (its outer 2.5 mm), the brain tissue lining a
+/// resection cavity (3 mm) and the dura around the craniotomy's edge (3 mm outside the
 /// preoperative brain, within 20 mm beyond the opening; under the opening it has been opened).
 void enhanceAfterContrastAgent(const Grid& G, const std::vector<unsigned char>& matter, const LabelPixel* deformedLabels,
                                const float* brainDepth, const Vec3& craniotomyCentre, const Vec3& axis, double openingRadius,
                                double whiteMean, float* image)
 {
-  const float enhanced = float(1.5 * whiteMean);
+  const float enhanced = float(1.6 * whiteMean);
   auto tumour = newImage<MaskImage>(G, 0);
   auto cavity = newImage<MaskImage>(G, 0);
   bool anyTumour = false, anyCavity = false;
@@ -446,9 +446,9 @@ void enhanceAfterContrastAgent(const Grid& G, const std::vector<unsigned char>& 
   const ScalarImage::Pointer toCavity = anyCavity ? signedDistanceMm(cavity) : nullptr;
   const double ringRadius = openingRadius + 20.0;
   for (std::size_t i = 0; i < matter.size(); ++i) {
-    if (toTumour && deformedLabels[i] == Tumour && toTumour->GetBufferPointer()[i] >= -2.0f) image[i] = enhanced;
-    if (toCavity && matter[i] == Tissue && toCavity->GetBufferPointer()[i] <= 1.5f) image[i] = enhanced;
-    if (deformedLabels[i] == Head && brainDepth[i] > 0.0f && brainDepth[i] <= 2.5f) {
+    if (toTumour && deformedLabels[i] == Tumour && toTumour->GetBufferPointer()[i] >= -2.5f) image[i] = enhanced;
+    if (toCavity && matter[i] == Tissue && toCavity->GetBufferPointer()[i] <= 3.0f) image[i] = enhanced;
+    if (deformedLabels[i] == Head && brainDepth[i] > 0.0f && brainDepth[i] <= 3.0f) {
       const Vec3 d = G.pointOf(i) - craniotomyCentre;
       const double along = dot(d, axis);
       if (dot(d, d) - along * along < ringRadius * ringRadius && along > -openingRadius) image[i] = enhanced;
