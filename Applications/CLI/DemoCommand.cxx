@@ -132,7 +132,7 @@ void addDemoCommand(CLI::App& app)
   command->add_option("--scenario", options->scenario,
                       "a named variant of the case (the options above and below override its values): " + scenarioNames)
     ->capture_default_str();
-  command->add_option("--contrast", options->contrast, "intraoperative contrast: t1, low-field-t1, t2 or flair")->capture_default_str();
+  command->add_option("--contrast", options->contrast, "intraoperative contrast: t1, low-field-t1, t2, flair or t1-post-contrast")->capture_default_str();
   command->add_option("--tumour", options->tumour, "tumour look: rim-enhancing, hypointense or nearly-isointense")->capture_default_str();
   command->add_option("--gap", options->gap, "what fills the gap under the craniotomy: dark or fluid-and-air")->capture_default_str();
   command->add_flag("--cavity-rim", options->cavityRim, "a bright rim of blood products on the resection cavity's wall");

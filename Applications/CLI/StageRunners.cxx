@@ -107,10 +107,12 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
   return {{"decided_by", e.decidedBy},
           {"tumour_median", finite(e.tumourMedian)},
           {"fluid_median", finite(e.fluidMedian)},
+          {"air_median", finite(e.airMedian)},
           {"parenchyma_median", finite(e.parenchymaMedian)},
           {"intraop_relative", finite(e.intraopRelative)},
           {"preop_relative", finite(e.preopRelative)},
           {"fluid_like_share", e.fluidLikeShare},
+          {"air_like_share", e.airLikeShare},
           {"tumour_like_share", e.tumourLikeShare},
           {"parenchyma_like_share", e.parenchymaLikeShare}};
 }
@@ -181,6 +183,16 @@ TissueClassificationResult classifyWithPrior(RunContext& context, const SpatialT
   }
   return classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), rigid, prototypes, parameters);
 }
+
+/// What the prototypes learned of this scan's contrast (0-100 scale), and its fluid's side.
+nlohmann::json scanContrastJson(const ScanContrast& c)
+{
+  auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  return {{"air_median", finite(c.air)},
+          {"fluid_median", finite(c.fluid)},
+          {"parenchyma_median", finite(c.parenchyma)},
+          {"fluid", c.fluidBrighterThanParenchyma() ? "brighter than the parenchyma" : "darker than the parenchyma"}};
+}
 } // namespace
 
 void runClassifyStage(RunContext& context)
@@ -241,6 +253,7 @@ void runClassifyStage(RunContext& context)
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
                                          {"tumour_evidence", tumourEvidenceJson(result.tumourEvidence)},
+                                         {"contrast", scanContrastJson(result.contrast)},
                                          {"relabelled_where_moved", relabelled},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
                                                          : std::string("preoperative labels through the rigid transform")},
@@ -530,6 +543,8 @@ void runSurfaceStage(RunContext& context)
                                         {"image_term_nodes", result.imageTermNodes},
                                         {"expected_intensity_inside", result.expectedInsideIntensity},
                                         {"expected_intensity_outside", result.expectedOutsideIntensity},
+                                        {"outside_brighter_share", result.outsideBrighterShare},
+                                        {"outside_sides", result.outsideSides},
                                         {"tumour_resected", result.tumourResected},
                                         {"flipped_triangles", result.flippedTriangles},
                                         {"sinking_direction", result.sinkingDirection},
@@ -693,13 +708,16 @@ NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImag
 nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds)
 {
   auto region = [](const RegionSimilarity& s) {
-    return nlohmann::json{{"voxels", s.voxels}, {"update", s.nonrigid}, {"rigid", s.rigid}, {"gain", s.gain()}};
+    return nlohmann::json{{"voxels", s.voxels}, {"update", s.nonrigid}, {"rigid", s.rigid}, {"gain", s.gain()},
+                          {"given", s.preoperativeGivenIntraoperative ? "intraoperative" : "preoperative"}};
   };
   const NonrigidUpdateTrustParameters p;
   return {{"nonrigid", trustName(a.trust)},
           {"rigid_fallback", a.trust == UpdateTrust::Rejected},
           {"reasons", a.reasons},
-          {"similarity", "correlation ratio eta^2 of the intraoperative image given the warped preoperative image"},
+          {"similarity", "correlation ratio eta^2 of the intraoperative image given the warped preoperative image, or of the "
+                         "warped preoperative image given the intraoperative one where the update gains more that way "
+                         "(each region's \"given\")"},
           {"near_boundary", region(a.band)},
           {"interior", region(a.interior)},
           {"moved", region(a.moved)},

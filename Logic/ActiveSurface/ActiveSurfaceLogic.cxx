@@ -452,14 +452,38 @@ private:
   bool factored_ = false, ok_ = false;
 };
 
-/// The image term: where, along a line, the intensity passes from the expected inside grey level
-/// to the expected outside one.
-struct ImageEdgeTerm {
-  ScalarImage::Pointer keepAlive;
-  std::unique_ptr<TrilinearVolume> intensity;
+/// One way the brain's surroundings differ from it in this scan: darker (insideSign +1: CSF and
+/// bone in T1, air and bone in every contrast) or brighter (-1: CSF and fluid in T2).
+struct OutsideSide {
   double threshold = 0, insideSign = 1;
   double contrast = 0; ///< |expected inside - expected outside|
 };
+
+/// The image term: where, along a line, the intensity passes from the expected inside grey level
+/// to an expected outside one. One side where the surroundings are on one side of the brain (T1,
+/// FLAIR: dark fluid, bone and air); two where they lie on both (T2: bright fluid, dark bone and air).
+struct ImageEdgeTerm {
+  ScalarImage::Pointer keepAlive;
+  std::unique_ptr<TrilinearVolume> intensity;
+  std::vector<OutsideSide> sides;
+};
+
+/// The expected grey levels: `inside` and `outside` from the segmentation's boundary band. The
+/// surroundings are two-sided when at least `minimumShare` of the outside band lies on each side of
+/// the inside median; each side's level is then the median of its part.
+std::vector<OutsideSide> outsideSides(const std::vector<double>& inside, const std::vector<double>& outside,
+                                      double minimumShare, double& brighterShare)
+{
+  const double in = median(inside), out = median(outside);
+  std::vector<double> darker, brighter;
+  for (double v : outside) (v > in ? brighter : darker).push_back(v);
+  brighterShare = outside.empty() ? 0.0 : double(brighter.size()) / double(outside.size());
+  auto sideTowards = [&](double level) {
+    return OutsideSide{0.5 * (in + level), in >= level ? 1.0 : -1.0, std::abs(in - level)};
+  };
+  if (std::min(brighterShare, 1.0 - brighterShare) < minimumShare) return {sideTowards(out)};
+  return {sideTowards(median(darker)), sideTowards(median(brighter))};
+}
 
 struct FitOutcome {
   Eigen::MatrixXd positions;
@@ -487,6 +511,56 @@ struct PointTargets {
   std::vector<bool> used;
   std::vector<Vec> points;
 };
+
+/// Whether the segmentation's boundary at a node shows the expected contrast: across it the mean
+/// intensity 1-4 mm inside and 1-4 mm outside must differ as brain and its surroundings do (a local
+/// test, so a bias field does not upset it), towards one of the sides. Where the surroundings lie on
+/// both sides (T2: bright fluid 1 mm out, dark bone 3 mm out, whose mean may equal the brain's),
+/// also when most samples outside are beyond a side's threshold and most inside are not.
+bool showsExpectedContrast(const ImageEdgeTerm& edges, const Vec& index, const Vec& indexStep, double target, double step,
+                           const ActiveSurfaceParameters& p)
+{
+  double inside = 0, outside = 0;
+  int count = 0, outsideLike = 0, insideLike = 0;
+  auto beyond = [&](double v) {
+    for (const OutsideSide& side : edges.sides) {
+      if (side.insideSign * (v - side.threshold) <= 0) return true;
+    }
+    return false;
+  };
+  for (double at = 1.0; at <= 4.0; at += step, ++count) {
+    const double in = edges.intensity->value(index + ((target - at) / step) * indexStep);
+    const double out = edges.intensity->value(index + ((target + at) / step) * indexStep);
+    inside += in;
+    outside += out;
+    insideLike += !beyond(in);
+    outsideLike += beyond(out);
+  }
+  for (const OutsideSide& side : edges.sides) {
+    if (side.insideSign * (inside - outside) / double(count) > p.minimumContrastFraction * side.contrast) return true;
+  }
+  return edges.sides.size() > 1 && 2 * outsideLike > count && 2 * insideLike > count;
+}
+
+/// The crossing from inside-like to outside-like (towards `side`) nearest to the node, within
+/// `searchMm` along the normal, if nearer than `edgeDistance` (then `edgeAt` and `edgeDistance` are set).
+void nearestEdge(const ImageEdgeTerm& edges, const OutsideSide& side, const Vec& index, const Vec& indexStep, double step,
+                 double searchMm, double& edgeAt, double& edgeDistance)
+{
+  const int samples = int(std::lround(searchMm / step));
+  double previous = side.insideSign * (edges.intensity->value(index - double(samples) * indexStep) - side.threshold);
+  for (int k = -samples + 1; k <= samples; ++k) {
+    const double g = side.insideSign * (edges.intensity->value(index + double(k) * indexStep) - side.threshold);
+    if (previous > 0 && g <= 0) {
+      const double at = step * (double(k - 1) + previous / (previous - g));
+      if (std::abs(at) < edgeDistance) {
+        edgeDistance = std::abs(at);
+        edgeAt = at;
+      }
+    }
+    previous = g;
+  }
+}
 
 FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
                       const TrilinearVolume& field, const PreopToIntraopIndex& toIndex, const ImageEdgeTerm* edges,
@@ -521,34 +595,14 @@ FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
       // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
       // here (grown into fluid, or eroded into brain) and the image alone decides.
       signed char& known = plausible[std::size_t(node)];
-      if (refreshPlausibility || known < 0) {
-        double inside = 0, outside = 0;
-        int count = 0;
-        for (double at = 1.0; at <= 4.0; at += step, ++count) {
-          inside += edges->intensity->value(index + ((target - at) / step) * indexStep);
-          outside += edges->intensity->value(index + ((target + at) / step) * indexStep);
-        }
-        known = edges->insideSign * (inside - outside) / double(count) > p.minimumContrastFraction * edges->contrast;
-      }
+      if (refreshPlausibility || known < 0) known = showsExpectedContrast(*edges, index, indexStep, target, step, p);
       const bool segmentationPlausible = known == 1;
       if (segmentationPlausible && !(p.imageWeight > 0)) {
         return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction; // no edge needed
       }
       // The image's edge nearest to the node: inside-like to outside-like along the normal.
-      const int samples = int(std::lround(p.imageSearchMm / step));
       double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
-      double previous = edges->insideSign * (edges->intensity->value(index - double(samples) * indexStep) - edges->threshold);
-      for (int k = -samples + 1; k <= samples; ++k) {
-        const double g = edges->insideSign * (edges->intensity->value(index + double(k) * indexStep) - edges->threshold);
-        if (previous > 0 && g <= 0) {
-          const double at = step * (double(k - 1) + previous / (previous - g));
-          if (std::abs(at) < edgeDistance) {
-            edgeDistance = std::abs(at);
-            edgeAt = at;
-          }
-        }
-        previous = g;
-      }
+      for (const OutsideSide& side : edges->sides) nearestEdge(*edges, side, index, indexStep, step, p.imageSearchMm, edgeAt, edgeDistance);
       const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
       if (segmentationPlausible) {
         if (p.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p.imageTrustMm) {
@@ -752,6 +806,7 @@ void ActiveSurfaceParameters::validate() const
   require(std::isfinite(maximumStepMm) && maximumStepMm > 0 && maximumStepMm <= 20, "the largest step must be in (0, 20] mm");
   require(maximumIterations >= 1 && maximumIterations <= 100000, "the iteration limit must be in [1, 100000]");
   require(std::isfinite(convergenceMm) && convergenceMm > 0, "the convergence threshold must be > 0 mm");
+  require(twoSidedMinimumShare >= 0 && twoSidedMinimumShare <= 0.5, "the two-sided share must be within 0 to 0.5");
   require(std::isfinite(distanceSmoothingMm) && distanceSmoothingMm >= 0 && distanceSmoothingMm <= 10,
           "the distance smoothing must be in [0, 10] mm");
   require(std::isfinite(imageWeight) && imageWeight >= 0 && imageWeight <= 1, "the image weight must be in [0, 1]");
@@ -925,16 +980,23 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
     const ScalarImage::Pointer imageAround = cropped(*intraopImage, region);
     const float* d = distance->GetBufferPointer();
     const float* v = imageAround->GetBufferPointer();
-    std::vector<double> inside, outsideBand;
+    const LabelPixel* l = labelsAround->GetBufferPointer();
+    std::vector<double> inside, outsideBand, fluid, parenchyma;
     for (std::size_t i = 0, count = cropGrid.numberOfVoxels(); i < count; ++i) {
       if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
       else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
+      if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
+      else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
     }
     result.expectedInsideIntensity = median(inside);
     result.expectedOutsideIntensity = median(outsideBand);
-    edges->threshold = 0.5 * (result.expectedInsideIntensity + result.expectedOutsideIntensity);
-    edges->insideSign = result.expectedInsideIntensity >= result.expectedOutsideIntensity ? 1.0 : -1.0;
-    edges->contrast = std::abs(result.expectedInsideIntensity - result.expectedOutsideIntensity);
+    // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
+    // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
+    // for the image term to catch, not a second side.
+    result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
+    edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
+                                result.outsideBrighterShare);
+    result.outsideSides = edges->sides.size();
     edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
     edges->keepAlive = imageAround;
   }

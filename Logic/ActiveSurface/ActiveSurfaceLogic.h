@@ -64,6 +64,12 @@ struct ActiveSurfaceParameters {
   /// The segmentation looks right at a node when the intensity 1-4 mm inside and 1-4 mm outside
   /// its boundary differ by at least this share of the expected contrast.
   double minimumContrastFraction = 0.35;
+  /// The brain's surroundings are two-sided (darker and brighter than the brain: T2's bright fluid
+  /// beside dark bone and air) when the segmentation's fluid (`fluidLabel`) is brighter than its
+  /// parenchyma and at least this share of the band outside the segmentation's boundary lies on
+  /// each side of the band inside; else one-sided (T1, FLAIR, low field), as it always was.
+  double twoSidedMinimumShare = 0.1;
+  int fluidLabel = 3, parenchymaLabel = 2;
   double imageSearchMm = 3.0;        ///< the image term looks this far along the normal, both ways
   double imageTrustMm = 1.5;         ///< and is used only where it agrees with the segmentation this well
   double unmatchedResidualMm = 2.0;  ///< a node ending farther than this from the target is left free
@@ -113,6 +119,9 @@ struct ActiveSurfaceResult {
   double initialMeanResidualMm = 0;  ///< the same before deforming
   double meanDisplacementMm = 0, maxDisplacementMm = 0;
   double expectedInsideIntensity = 0, expectedOutsideIntensity = 0;
+  double outsideBrighterShare = 0;   ///< of the band outside the boundary, the share brighter than the inside median
+  bool fluidBrighterThanParenchyma = false; ///< the segmentation's fluid against its parenchyma, in the image
+  std::size_t outsideSides = 0;      ///< 1: surroundings on one side of the brain's intensity, 2: both (T2), 0: no image term
   std::size_t imageTermNodes = 0;    ///< nodes where the image term found an edge at the end
   std::size_t flippedTriangles = 0;  ///< triangles whose orientation reversed (should be none)
   std::array<double, 3> sinkingDirection{}; ///< the common direction estimated (model frame; 0: none)

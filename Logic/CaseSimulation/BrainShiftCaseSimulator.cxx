@@ -362,6 +362,7 @@ IntensityMap intraopContrastMap(IntraopContrast contrast, double csf, double gre
   case IntraopContrast::LowFieldT1: return {anchors, {0.0, 0.55, 0.80, 0.92, 1.30}};
   case IntraopContrast::T2: return {anchors, {0.0, 1.00, 0.55, 0.42, 0.70}};
   case IntraopContrast::Flair: return {anchors, {0.0, 0.12, 0.80, 0.62, 0.70}};
+  case IntraopContrast::T1PostContrast: return {}; // the T1 map; the enhancement is added where it is (enhanceAfterContrastAgent)
   }
   return {};
 }
@@ -431,6 +432,38 @@ void fillIntraoperativeMatter(const CaseParameters& P, const Grid& G, const Vec3
   }
 }
 
+/// T1 after gadolinium: what takes up the agent enhances strongly (1.6 of the white matter before
+/// the T1 map): the rim of a tumour left in place (its outer 2.5 mm), the brain tissue lining a
+/// resection cavity (3 mm) and the dura around the craniotomy's edge (3 mm outside the
+/// preoperative brain, within 20 mm beyond the opening; under the opening it has been opened).
+void enhanceAfterContrastAgent(const Grid& G, const std::vector<unsigned char>& matter, const LabelPixel* deformedLabels,
+                               const float* brainDepth, const Vec3& craniotomyCentre, const Vec3& axis, double openingRadius,
+                               double whiteMean, float* image)
+{
+  const float enhanced = float(1.6 * whiteMean);
+  auto tumour = newImage<MaskImage>(G, 0);
+  auto cavity = newImage<MaskImage>(G, 0);
+  bool anyTumour = false, anyCavity = false;
+  for (std::size_t i = 0; i < matter.size(); ++i) {
+    tumour->GetBufferPointer()[i] = deformedLabels[i] == Tumour;
+    cavity->GetBufferPointer()[i] = matter[i] == Cavity;
+    anyTumour = anyTumour || deformedLabels[i] == Tumour;
+    anyCavity = anyCavity || matter[i] == Cavity;
+  }
+  const ScalarImage::Pointer toTumour = anyTumour ? signedDistanceMm(tumour) : nullptr;
+  const ScalarImage::Pointer toCavity = anyCavity ? signedDistanceMm(cavity) : nullptr;
+  const double ringRadius = openingRadius + 20.0;
+  for (std::size_t i = 0; i < matter.size(); ++i) {
+    if (toTumour && deformedLabels[i] == Tumour && toTumour->GetBufferPointer()[i] >= -2.5f) image[i] = enhanced;
+    if (toCavity && matter[i] == Tissue && toCavity->GetBufferPointer()[i] <= 3.0f) image[i] = enhanced;
+    if (deformedLabels[i] == Head && brainDepth[i] > 0.0f && brainDepth[i] <= 3.0f) {
+      const Vec3 d = G.pointOf(i) - craniotomyCentre;
+      const double along = dot(d, axis);
+      if (dot(d, d) - along * along < ringRadius * ringRadius && along > -openingRadius) image[i] = enhanced;
+    }
+  }
+}
+
 } // namespace
 
 // ---- Parameters ---------------------------------------------------------------------------
@@ -476,13 +509,15 @@ std::string toString(IntraopContrast contrast)
   case IntraopContrast::LowFieldT1: return "low-field-t1";
   case IntraopContrast::T2: return "t2";
   case IntraopContrast::Flair: return "flair";
+  case IntraopContrast::T1PostContrast: return "t1-post-contrast";
   }
   return "";
 }
 
 IntraopContrast intraopContrastFromString(const std::string& text)
 {
-  return enumFromString(text, {IntraopContrast::T1, IntraopContrast::LowFieldT1, IntraopContrast::T2, IntraopContrast::Flair},
+  return enumFromString(text, {IntraopContrast::T1, IntraopContrast::LowFieldT1, IntraopContrast::T2, IntraopContrast::Flair,
+                                IntraopContrast::T1PostContrast},
                         "--contrast");
 }
 
@@ -626,6 +661,9 @@ const std::vector<CaseScenario>& caseScenarios()
       {"rf10-flair", "right frontal, 10 mm, tumour in place, a FLAIR intraoperative scan", S::RightFrontal, 10, false, T::RimEnhancing, C::Flair, false, 0.04, 0.2, 2115},
       {"rf10-fe-sliding", "right frontal, 10 mm, resection, low-field; finite element truth (CalculiX, sliding brain surface)", S::RightFrontal, 10, true, T::RimEnhancing, C::LowFieldT1, false, 0.04, 0.2, 2116},
       {"lp15-fe-sliding-intact", "left parietal, 15 mm, tumour in place; finite element truth (CalculiX, sliding brain surface)", S::LeftParietal, 15, false, T::Hypointense, C::T1, false, 0.05, 0.25, 2117},
+      {"rf10-t1post-intact", "right frontal, 10 mm, tumour in place, a T1 post-contrast intraoperative scan (enhancing tumour rim and dura)", S::RightFrontal, 10, false, T::RimEnhancing, C::T1PostContrast, false, 0.04, 0.2, 2118},
+      {"rf10-t1post", "right frontal, 10 mm, resection, a T1 post-contrast intraoperative scan (enhancing cavity wall and dura)", S::RightFrontal, 10, true, T::RimEnhancing, C::T1PostContrast, false, 0.04, 0.2, 2119},
+      {"rf10-t2-intact", "right frontal, 10 mm, tumour in place, a T2-weighted intraoperative scan", S::RightFrontal, 10, false, T::RimEnhancing, C::T2, false, 0.04, 0.2, 2120},
     };
     std::vector<CaseScenario> list{{"default", "the built-in case: right frontal, 10 mm, resection, T1, a dark gap", CaseParameters{}}};
     for (const Variant& v : variants) {
@@ -999,6 +1037,9 @@ SimulatedCase simulateCase(const CaseParameters& P)
     }
   }
   fillIntraoperativeMatter(P, G, axis, fluidValue, whiteMean, matter, dImage, figures);
+  if (P.contrast == IntraopContrast::T1PostContrast) {
+    enhanceAfterContrastAgent(G, matter, dLabels, brainDepth, craniotomyCentre, axis, openingRadius, whiteMean, dImage);
+  }
   // -- The patient in the scanner: intraop point y = M(x'); the truth maps y back.
   auto motion = itk::Euler3DTransform<double>::New();
   {

@@ -35,8 +35,10 @@ enum class CraniotomySite { RightFrontal, LeftFrontal, RightParietal, LeftPariet
 /// The intraoperative scanner's contrast, as a map of the preoperative T1 intensity through the
 /// tissue means (CSF, grey, white, fat): T1 (a gamma of 0.85, the default), low-field T1 (grey,
 /// white and CSF closer together), T2-weighted (fluid bright, white matter dark), FLAIR (fluid
-/// suppressed, grey brighter than white).
-enum class IntraopContrast { T1, LowFieldT1, T2, Flair };
+/// suppressed, grey brighter than white), T1 post-contrast (the T1 map, and what takes up the agent
+/// enhances strongly: a tumour's rim, the tissue lining a resection cavity, the dura around the
+/// craniotomy).
+enum class IntraopContrast { T1, LowFieldT1, T2, Flair, T1PostContrast };
 
 /// How the tumour looks in the preoperative (post-contrast T1) scan.
 enum class TumourAppearance {
@@ -92,7 +94,7 @@ struct CaseParameters {
 std::string toString(CraniotomySite site);
 /// "right-frontal", ... ; InputError listing the choices otherwise.
 CraniotomySite craniotomySiteFromString(const std::string& text);
-std::string toString(IntraopContrast contrast);   ///< "t1", "low-field-t1", "t2", "flair"
+std::string toString(IntraopContrast contrast);   ///< "t1", "low-field-t1", "t2", "flair", "t1-post-contrast"
 IntraopContrast intraopContrastFromString(const std::string& text);
 std::string toString(TumourAppearance appearance); ///< "rim-enhancing", "hypointense", "nearly-isointense"
 TumourAppearance tumourAppearanceFromString(const std::string& text);

@@ -5,8 +5,10 @@
 // drags the surface) and inside. The intraoperative scan may have another contrast (T2, FLAIR,
 // low field), so the similarity is the correlation ratio eta^2 = 1 - E[Var(I | W)] / Var(I) of the
 // intraoperative intensity I given the warped preoperative intensity W (in bins): any functional
-// relation between the two contrasts scores high, an inverted one as well. It judges the update
-// with the image alone, not with the classification it was built from.
+// relation between the two contrasts scores high, an inverted one as well. Where the relation is a
+// function only the other way (a T1's dark CSF, bone and air are bright fluid and dark bone and air
+// in a T2), eta^2 of W given I; each region keeps the direction in which the update gains more. It
+// judges the update with the image alone, not with the classification it was built from.
 #include "ImageTypes.h"
 
 #include <optional>
@@ -23,6 +25,9 @@ std::string trustName(UpdateTrust trust);
 struct RegionSimilarity {
   std::size_t voxels = 0;
   double nonrigid = 0, rigid = 0;
+  /// eta^2 of the warped preoperative image given the intraoperative one (the update gained more
+  /// that way: bothDirections), not of the intraoperative given the warped preoperative.
+  bool preoperativeGivenIntraoperative = false;
   double gain() const { return nonrigid - rigid; }
 };
 
@@ -52,6 +57,10 @@ struct NonrigidUpdateTrustParameters {
   double bandHalfWidthMm = 5.0;
   double movedMm = 1.0;
   unsigned bins = 32;
+  /// Score each region both ways (I given W and W given I) and keep the way the update gains more:
+  /// a T1's one dark look (CSF, bone, air) is two in a T2 (bright fluid, dark bone and air), a
+  /// relation that is a function only from the T2 to the T1. False: I given W alone.
+  bool bothDirections = true;
   std::size_t minimumVoxels = 300; ///< a region with fewer voxels is not scored
   /// The gain of eta^2 (update minus rigid; where the update moves the brain, else near the
   /// boundary) below which the update is rejected, and below which it is doubtful (not clearly better).

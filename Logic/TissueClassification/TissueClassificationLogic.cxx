@@ -319,6 +319,35 @@ double median(std::vector<float> v)
 }
 
 
+} // namespace
+
+ScanContrast scanContrastOf(const std::map<LabelPixel, std::vector<float>>& prototypeIntensity)
+{
+  auto medianOf = [&](LabelPixel label) {
+    const auto found = prototypeIntensity.find(label);
+    return found == prototypeIntensity.end() ? std::nan("") : median(found->second);
+  };
+  ScanContrast c;
+  c.air = medianOf(Background);
+  c.fluid = medianOf(Ventricles);
+  c.parenchyma = medianOf(Parenchyma);
+  return c;
+}
+
+bool ScanContrast::looksLikeFluidOrAir(double v) const
+{
+  if (!std::isfinite(parenchyma)) return false;
+  const double toParenchyma = std::abs(v - parenchyma);
+  return (std::isfinite(fluid) && std::abs(v - fluid) < toParenchyma) || (std::isfinite(air) && std::abs(v - air) < toParenchyma);
+}
+
+bool ScanContrast::fluidBrighterThanParenchyma() const
+{
+  return fluid > parenchyma;
+}
+
+namespace {
+
 template <class TLabel>
 itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySize)
 {
@@ -335,14 +364,17 @@ itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySi
   return relabel->GetOutput();
 }
 
-/// The tumour's prototypes' intensity against the ventricles' (fluid) and the parenchyma's.
+/// The tumour's prototypes' intensity against the ventricles' (fluid), the background's (air) and
+/// the parenchyma's, as this scan shows them (ScanContrast): a cavity holds fluid and air, whatever
+/// their order in this contrast.
 TumourResectionEvidence tumourResectionEvidence(std::map<LabelPixel, std::vector<float>>& prototypeIntensity,
-                                                const TissueClassificationParameters& P)
+                                                const ScanContrast& contrast, const TissueClassificationParameters& P)
 {
   TumourResectionEvidence e;
   e.tumourMedian = median(prototypeIntensity[Tumour]);
-  e.parenchymaMedian = median(prototypeIntensity[Parenchyma]);
-  e.fluidMedian = prototypeIntensity.count(Ventricles) ? median(prototypeIntensity[Ventricles]) : std::nan("");
+  e.parenchymaMedian = contrast.parenchyma;
+  e.fluidMedian = contrast.fluid;
+  e.airMedian = contrast.air;
   const double span = e.parenchymaMedian - e.fluidMedian;
   e.intraopRelative = std::abs(span) > 1e-6 ? (e.tumourMedian - e.fluidMedian) / span : std::nan("");
   e.preopRelative = P.preopTumourContrast;
@@ -353,23 +385,33 @@ TumourResectionEvidence tumourResectionEvidence(std::map<LabelPixel, std::vector
   if (std::isfinite(span) && std::abs(span) > 1e-6) {
     const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
     const double expected = e.fluidMedian + before * span;
-    std::size_t fluid = 0, tumour = 0, parenchyma = 0;
+    std::size_t fluid = 0, air = 0, tumour = 0, parenchyma = 0;
     for (float v : prototypeIntensity[Tumour]) {
-      const double toFluid = std::abs(v - e.fluidMedian), toTumour = std::abs(v - expected), toParenchyma = std::abs(v - e.parenchymaMedian);
-      if (toFluid <= toTumour && toFluid <= toParenchyma) ++fluid;
-      else if (toTumour <= toParenchyma) ++tumour;
-      else ++parenchyma;
+      // Air counts with the fluid (the cavity's upper part); in T1 it is nearer the fluid anyway.
+      const double toLiquid = std::abs(v - e.fluidMedian);
+      const double toAir = std::isfinite(e.airMedian) ? std::abs(v - e.airMedian) : std::numeric_limits<double>::infinity();
+      const double toFluid = std::min(toLiquid, toAir);
+      const double toTumour = std::abs(v - expected), toParenchyma = std::abs(v - e.parenchymaMedian);
+      if (toFluid <= toTumour && toFluid <= toParenchyma) {
+        ++fluid;
+        air += toAir < toLiquid;
+      } else if (toTumour <= toParenchyma) {
+        ++tumour;
+      } else {
+        ++parenchyma;
+      }
     }
     const double all = double(std::max<std::size_t>(1, fluid + tumour + parenchyma));
     e.fluidLikeShare = double(fluid) / all;
+    e.airLikeShare = double(air) / all;
     e.tumourLikeShare = double(tumour) / all;
     e.parenchymaLikeShare = double(parenchyma) / all;
   }
   return e;
 }
 
-/// Resected when more of the tumour's prototypes look like fluid than like the tumour did before
-/// surgery. A tumour that looked like fluid before surgery (within 0.15 of the way to the
+/// Resected when more of the tumour's prototypes look like fluid (or air) than like the tumour did
+/// before surgery. A tumour that looked like fluid before surgery (within 0.15 of the way to the
 /// parenchyma) cannot be told from its cavity by intensity: it is kept (the safe side: the
 /// classification keeps it as tissue).
 bool decideTumourResection(const TumourResectionEvidence& e, TumourResection told)
@@ -377,6 +419,15 @@ bool decideTumourResection(const TumourResectionEvidence& e, TumourResection tol
   if (told != TumourResection::Auto) return told == TumourResection::Resected;
   if (!std::isfinite(e.intraopRelative)) return false;
   const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
+  if (e.fluidMedian > e.parenchymaMedian) {
+    // Fluid brighter than the parenchyma (T2): the tumour's look before surgery (a T1) does not
+    // carry over (most tumours are bright in T2, as fluid is). Air, dark in every contrast and in
+    // no tumour, is the cavity's sign (measured: 5-47 % of the prototypes of a resected tumour
+    // under fluid and air, none of one in place); without it, most of the prototypes must look
+    // like fluid, and a tumour that looked like fluid before surgery is kept.
+    if (e.airLikeShare >= 0.03) return true;
+    return before >= 0.15 && e.fluidLikeShare >= 0.5;
+  }
   if (before < 0.15) return false;
   // A tumour that looked like the parenchyma (enhancing, isointense) cannot be told from the
   // tissue the rigid prior put in its place: a cavity shows as fluid in a good share of it.
@@ -661,10 +712,11 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   // the clean-up (decideTumourResection).
   std::map<LabelPixel, std::vector<float>> prototypeIntensity;
   for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) prototypeIntensity[prototypeLabels[p]].push_back(intensity[prototypeVoxels[p]]);
-  const double parenchymaMedian = median(prototypeIntensity[Parenchyma]);
-  const double fluidMedian = present.count(Ventricles) ? median(prototypeIntensity[Ventricles]) : std::nan("");
+  // What this scan's contrast is: every intensity rule below is stated through these medians.
+  result.contrast = scanContrastOf(prototypeIntensity);
+  if (!present.count(Ventricles)) result.contrast.fluid = std::nan("");
   if (present.count(Tumour)) {
-    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, P);
+    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, result.contrast, P);
     result.tumourResected = decideTumourResection(result.tumourEvidence, P.tumourResection);
   }
   PrototypeCloud cloud;
@@ -735,8 +787,11 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   const auto cleanupStart = Clock::now();
   auto isBrain = [](LabelPixel l) { return l == Parenchyma || l == Ventricles || l == Tumour; };
   if (present.count(Ventricles)) {
-    // Thick fluid in the brain: ventricles where the aligned ventricles are, else a gap or cavity.
-    const double fluidThreshold = 0.5 * (fluidMedian + parenchymaMedian);
+    // Thick fluid (or air) in the brain: ventricles where the aligned ventricles are, else a gap or
+    // cavity. Fluid or air is what looks more like this scan's fluid or background than like its
+    // parenchyma (in T1, darker than halfway from the fluid to the parenchyma, as it always was; in
+    // T2 the bright fluid and the dark air both).
+    const ScanContrast& contrast = result.contrast;
     auto fluid = MaskImage::New();
     fluid->CopyInformation(&intraop);
     fluid->SetRegions(intraop.GetLargestPossibleRegion());
@@ -744,7 +799,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     // A tumour that is still there is tissue, however dark its core.
     const bool tumourPresent = present.count(Tumour) && !result.tumourResected;
     for (std::size_t i = 0; i < N; ++i) {
-      fluid->GetBufferPointer()[i] = isBrain(out[i]) && intensity[i] < fluidThreshold && !(tumourPresent && out[i] == Tumour);
+      fluid->GetBufferPointer()[i] = isBrain(out[i]) && contrast.looksLikeFluidOrAir(intensity[i]) && !(tumourPresent && out[i] == Tumour);
     }
     ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
     auto core = MaskImage::New();

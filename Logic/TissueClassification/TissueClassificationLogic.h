@@ -53,10 +53,27 @@ double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImag
 /// fluid, the tumour's own expected intensity and the parenchyma, and who decided.
 struct TumourResectionEvidence {
   double tumourMedian = 0, fluidMedian = 0, parenchymaMedian = 0;
+  double airMedian = std::numeric_limits<double>::quiet_NaN(); ///< the background's prototypes: air
   double intraopRelative = 0, preopRelative = 0;
   double fluidLikeShare = 0, tumourLikeShare = 0, parenchymaLikeShare = 0;
+  double airLikeShare = 0; ///< of the fluid-like share, those nearer the air than the fluid
   std::string decidedBy; ///< "image" or "user"; empty without a tumour
 };
+
+/// This scan's contrast as its prototypes learned it: the medians (0-100 scale) of the background
+/// (air), the ventricles (fluid) and the parenchyma. Every intensity rule of the classification is
+/// stated through them, not through a T1 order: fluid is dark in T1 and FLAIR, bright in T2; air is
+/// dark in all. NaN for a class without prototypes.
+struct ScanContrast {
+  double air = std::numeric_limits<double>::quiet_NaN();
+  double fluid = std::numeric_limits<double>::quiet_NaN();
+  double parenchyma = std::numeric_limits<double>::quiet_NaN();
+  /// Nearer this scan's fluid or air than its parenchyma (T1: darker than halfway to the parenchyma).
+  bool looksLikeFluidOrAir(double intensity) const;
+  bool fluidBrighterThanParenchyma() const; ///< T2-like
+};
+/// The medians of the prototypes' intensities per label (0 background, 2 parenchyma, 3 ventricles).
+ScanContrast scanContrastOf(const std::map<LabelPixel, std::vector<float>>& prototypeIntensity);
 
 struct TissueClassificationParameters {
   /// Polled between the phases and every 65,536 voxels of the k-NN: CancelledError when set.
@@ -91,6 +108,7 @@ struct TissueClassificationResult {
   std::map<LabelPixel, unsigned> prototypesPerClass;
   bool tumourResected = false;               ///< the tumour's prototypes look like fluid (or the user said so)
   TumourResectionEvidence tumourEvidence;
+  ScanContrast contrast;                     ///< what the prototypes learned of this scan's contrast
   double featureSeconds = 0, knnSeconds = 0, cleanupSeconds = 0;
   std::size_t voxels = 0;
   std::size_t knnQueries = 0;                ///< voxels that needed a tree query (the rest shared an answer)

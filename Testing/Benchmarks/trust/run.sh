@@ -8,6 +8,7 @@
 # the update's (the one set aside when rejected) against the rigid transform's.
 #
 #   Testing/Benchmarks/trust/run.sh [OUTPUT_DIR [SIZE...]]
+#   SMALL_CASES="default:;t2:--contrast t2 --gap fluid-and-air" Testing/Benchmarks/trust/run.sh DIR small
 #
 # OUTPUT_DIR defaults to Testing/Benchmarks/results/trust; SIZEs default to "small full" (the full
 # size runs a subset of the cases). Writes machine.txt, runs.csv (one row per run) and summary.md
@@ -67,10 +68,13 @@ damage() { "$python" "$here/damage_labels.py" "$@" >/dev/null; }
 for size in "${sizes[@]}"; do
   # name: demo options. Every case shares the head's motion and the intraoperative grid, so one
   # case's labels fit another's grid.
-  if [ "$size" = small ]; then
+  if [ "$size" = small ] && [ -n "${SMALL_CASES:-}" ]; then
+    IFS=';' read -r -a cases <<< "$SMALL_CASES" # e.g. "default:;t2:--contrast t2 --gap fluid-and-air"
+  elif [ "$size" = small ]; then
     cases=("default:" "shift3:--shift 3" "shift5:--shift 5" "shift15:--shift 15" "leftpar:--craniotomy left-parietal"
       "vertex-noresect:--craniotomy vertex --no-resection" "noise10:--noise 0.10" "noise25:--noise 0.25"
-      "bias50:--bias 0.5" "seed7:--seed 7 --shift 8")
+      "bias50:--bias 0.5" "seed7:--seed 7 --shift 8" "t2:--contrast t2 --gap fluid-and-air" "t2-dark-gap:--contrast t2"
+      "flair:--contrast flair --gap fluid-and-air" "t1-post-contrast:--contrast t1-post-contrast --gap fluid-and-air")
   else
     cases=("default:" "shift5:--shift 5")
   fi

@@ -100,6 +100,31 @@ int CaseSimulationScenarioTest(int, char*[])
       BS_CHECK(t2.ventricles > 1.3 * t2.parenchyma);
       BS_CHECK(flair.ventricles < 0.6 * flair.parenchyma);
     }
+    // T1 post-contrast: the T1 map, and the tissue lining the cavity and the dura around the
+    // craniotomy enhance (1.6 of the white matter before the map). The same seed draws the same
+    // noise and bias, so voxel by voxel the post-contrast scan is the T1 one or brighter.
+    {
+      CaseParameters p = smallScenario("default");
+      const SimulatedCase plain = simulateCase(p);
+      p.contrast = IntraopContrast::T1PostContrast;
+      const SimulatedCase post = simulateCase(p);
+      std::size_t brighter[5] = {0, 0, 0, 0, 0}, darker = 0;
+      const float* a = plain.intraopImage->GetBufferPointer();
+      const float* b = post.intraopImage->GetBufferPointer();
+      const LabelPixel* truth = post.intraopLabels->GetBufferPointer();
+      for (std::size_t i = 0, n = post.intraopLabels->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+        if (b[i] > 1.15f * a[i] + 30.f) brighter[std::min<LabelPixel>(truth[i], 4)] += 1;
+        if (b[i] < 0.95f * a[i] - 30.f) ++darker;
+      }
+      std::cout << "enhanced voxels: background " << brighter[0] << ", head (dura) " << brighter[1] << ", parenchyma (cavity lining) "
+                << brighter[2] << "; darker " << darker << "\n";
+      BS_CHECK_MSG(brighter[1] > 100 && brighter[2] > 30, brighter[1] << ", " << brighter[2]);
+      BS_CHECK_MSG(darker == 0, darker);
+      BS_CHECK(toString(IntraopContrast::T1PostContrast) == "t1-post-contrast");
+      BS_CHECK(intraopContrastFromString("t1-post-contrast") == IntraopContrast::T1PostContrast);
+      BS_CHECK(caseScenario("rf10-t1post-intact").parameters.contrast == IntraopContrast::T1PostContrast);
+      BS_CHECK(caseScenario("rf10-t2").parameters.seed == 2114); // the catalogue's seeds are kept
+    }
     // A tumour left in place: landmarks on its margin, none near a cavity; its look preoperatively.
     {
       const SimulatedCase c = simulateCase(smallScenario("lf10-intact-isointense"));
