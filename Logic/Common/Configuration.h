@@ -71,12 +71,12 @@ struct Configuration {
   /// the solve, rejected in rounds (FiniteElementJob.h): "block_matching" in the file.
   struct BlockMatching {
     bool enabled = true;
-    /// Chosen on Testing/Benchmarks/results/blockmatching and the hard scenarios (README): 3,000
-    /// blocks 4 mm apart, stiffer matches and a rejection of gross outliers only were better on
-    /// every scenario measured than 1,500 blocks, 0.01 N/mm and a 1 mm / 2.5 sigma rejection.
+    /// Chosen on Testing/Benchmarks/results/blockmatching and five hard scenarios (README): 3,000
+    /// blocks 4 mm apart, stiffer matches (0.01 -> 0.03 -> 0.1 -> 0.3 N/mm, each better on the mean
+    /// of the five) and a rejection of gross outliers only (2 mm, 3.5 robust sigmas).
     double blockHalfSizeMm = 4.0, blockSpacingMm = 4.0, selectedShare = 0.5, searchRadiusMm = 6.0, minimumSimilarity = 0.5;
     double maximumBlocks = 3000;
-    double stiffnessNPerMm = 0.03;  ///< of a match of correlation 1 along the directions its structure pins down
+    double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;
 
