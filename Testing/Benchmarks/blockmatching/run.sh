@@ -33,16 +33,17 @@ mkdir -p "$out/runs/configs"
 declare -A settings=(
   [surface-only]='"enabled": false'
   [default]=''
-  [blocks-250]='"maximum_blocks": 250'
-  [blocks-500]='"maximum_blocks": 500'
-  [blocks-3000]='"maximum_blocks": 3000, "block_spacing_mm": 4.0'
+  [blocks-500]='"maximum_blocks": 500, "block_spacing_mm": 5.0'
+  [blocks-1500]='"maximum_blocks": 1500, "block_spacing_mm": 5.0'
+  [blocks-6000]='"maximum_blocks": 6000, "block_spacing_mm": 3.0'
   [radius-3]='"search_radius_mm": 3.0'
   [radius-10]='"search_radius_mm": 10.0'
   [rounds-0]='"rejection_rounds": 0'
-  [rounds-1]='"rejection_rounds": 1'
   [rounds-6]='"rejection_rounds": 6'
-  [stiffness-0.003]='"stiffness_n_per_mm": 0.003'
+  [rejection-1mm]='"rejection_floor_mm": 1.0, "outlier_factor": 2.5'
   [stiffness-0.03]='"stiffness_n_per_mm": 0.03'
+  [stiffness-0.1]='"stiffness_n_per_mm": 0.1'
+  [stiffness-1]='"stiffness_n_per_mm": 1.0'
 )
 for name in "${!settings[@]}"; do
   printf '{"block_matching": {%s}}\n' "${settings[$name]}" > "$out/runs/configs/$name.json"

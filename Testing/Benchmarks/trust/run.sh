@@ -57,7 +57,7 @@ damaged() {
   {
     "$brainshift" surface --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
       --output-dir "$folder" &&
-      "$brainshift" simulate --output-dir "$folder" &&
+      "$brainshift" simulate "${inputs[@]}" --output-dir "$folder" &&
       "$brainshift" warp "${inputs[@]}" --output-dir "$folder"
   } > "$folder/log.txt" 2>&1 || status=$?
   score "$folder" "$case_dir" "$size" "$name" "$variant" "$status"
