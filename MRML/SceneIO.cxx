@@ -311,8 +311,14 @@ constexpr bool LandmarkPairsLocked = true;
 /// 3D Slicer 5 writes them (vtkMRMLLayoutNode, vtkMRMLSliceCompositeNode): the views show these
 /// volumes on load. The volume references are written both as `references` roles (Slicer 5) and as
 /// the legacy `backgroundVolumeID` attributes (Slicer 4), which Slicer 5 reads when the role is absent.
-std::string sliceViewElements(const SliceViewLayers& layers)
+/// Nothing when the scene has no layers; a layer whose volume has no data (not written) is empty.
+std::string sliceViewElements(const Scene& scene)
 {
+  SliceViewLayers layers = scene.sliceViewLayers();
+  for (std::string* id : {&layers.backgroundVolumeId, &layers.foregroundVolumeId, &layers.labelVolumeId}) {
+    if (!id->empty() && !hasData(*scene.node(*id))) id->clear();
+  }
+  if (layers.empty()) return "";
   Element layout("Layout");
   layout.set("id", "vtkMRMLLayoutNodevtkMRMLLayoutNode").set("name", "Layout").set("hideFromEditors", true);
   layout.set("singletonTag", "vtkMRMLLayoutNode").set("currentViewArrangement", "3"); // SlicerLayoutFourUpView
@@ -333,6 +339,38 @@ std::string sliceViewElements(const SliceViewLayers& layers)
     composite.set("labelOpacity", layers.labelOpacity).set("fiducialVisibility", "1").set("fiducialLabelVisibility", "1");
     composite.set("layoutName", view).set("doPropagateVolumeSelection", "1");
     xml += composite.str();
+  }
+  return xml;
+}
+
+/// A landmark pair set as two point lists ("<name>_preop", "<name>_intraop"), each a .mrk.json file
+/// and its MarkupsFiducial, display and storage elements. The preoperative points live in the
+/// preoperative frame, under the node's transform.
+std::string landmarkListElements(LandmarksNode& node, const std::string& transformId, WriteContext& context)
+{
+  std::string xml;
+  for (const char* side : {"preop", "intraop"}) {
+    const bool preop = std::string(side) == "preop";
+    std::vector<NamedPoint> points;
+    for (const LandmarkPair& pair : node.pairs()) points.push_back({pair.name, preop ? pair.preop : pair.intraop});
+    const fs::path file = context.newDataFile(node.name() + "_" + side, ".mrk.json");
+    writeMarkupsJson(points, file, LandmarkPairsLocked);
+    const std::string listId = node.id() + (preop ? "_preop" : "_intraop");
+    const std::string displayId = "vtkMRMLMarkupsDisplayNode" + std::to_string(++context.displayCounter);
+    const std::string storageId = "vtkMRMLMarkupsJsonStorageNode" + std::to_string(++context.storageCounter);
+    auto attributes = attributesWithRole(node);
+    attributes[PairsAttribute] = node.name();
+    attributes[SideAttribute] = side;
+    Element list = commonElement("MarkupsFiducial", listId, node.name() + " " + side, attributes,
+                                 referencesOf(displayId, storageId, preop ? transformId : ""));
+    list.set("locked", LandmarkPairsLocked).set("controlPointLabelFormat", "%N-%d");
+    xml += list.str();
+    Element display("MarkupsDisplay");
+    display.set("id", displayId).set("name", "MarkupsDisplay").set("hideFromEditors", true).set("visibility", true);
+    display.set("color", preop ? "0.4 1 1" : "1 1 0.4").set("selectedColor", preop ? "0.2 0.8 1" : "1 0.8 0.2");
+    display.set("pointLabelsVisibility", true); // each point shows its name
+    xml += display.str();
+    xml += storageElement("MarkupsJsonStorage", storageId, context.relative(file), true);
   }
   return xml;
 }
@@ -381,32 +419,7 @@ void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions&
       !node.parentTransformId().empty() && scene.node(node.parentTransformId()) ? node.parentTransformId() : "";
 
     if (node.kind() == NodeKind::Landmarks) {
-      auto& landmarks = static_cast<LandmarksNode&>(node);
-      for (const char* side : {"preop", "intraop"}) {
-        const bool preop = std::string(side) == "preop";
-        std::vector<NamedPoint> points;
-        for (const LandmarkPair& pair : landmarks.pairs()) points.push_back({pair.name, preop ? pair.preop : pair.intraop});
-        const fs::path file = context.newDataFile(node.name() + "_" + side, ".mrk.json");
-        writeMarkupsJson(points, file, LandmarkPairsLocked);
-        const std::string suffix = std::string(side) == "preop" ? "_preop" : "_intraop";
-        const std::string listId = node.id() + suffix;
-        const std::string displayId = "vtkMRMLMarkupsDisplayNode" + std::to_string(++context.displayCounter);
-        const std::string storageId = "vtkMRMLMarkupsJsonStorageNode" + std::to_string(++context.storageCounter);
-        auto attributes = attributesWithRole(node);
-        attributes[PairsAttribute] = node.name();
-        attributes[SideAttribute] = side;
-        // Preoperative points live in the preoperative frame, under the node's transform.
-        Element list = commonElement("MarkupsFiducial", listId, node.name() + " " + side, attributes,
-                                     referencesOf(displayId, storageId, preop ? transformId : ""));
-        list.set("locked", LandmarkPairsLocked).set("controlPointLabelFormat", "%N-%d");
-        xml += list.str();
-        Element display("MarkupsDisplay");
-        display.set("id", displayId).set("name", "MarkupsDisplay").set("hideFromEditors", true).set("visibility", true);
-        display.set("color", preop ? "0.4 1 1" : "1 1 0.4").set("selectedColor", preop ? "0.2 0.8 1" : "1 0.8 0.2");
-        display.set("pointLabelsVisibility", true); // each point shows its name
-        xml += display.str();
-        xml += storageElement("MarkupsJsonStorage", storageId, context.relative(file), true);
-      }
+      xml += landmarkListElements(static_cast<LandmarksNode&>(node), transformId, context);
       node.markStored();
       continue;
     }
@@ -483,11 +496,7 @@ void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions&
     case NodeKind::Landmarks: break;
     }
   }
-  SliceViewLayers layers = scene.sliceViewLayers();
-  for (std::string* id : {&layers.backgroundVolumeId, &layers.foregroundVolumeId, &layers.labelVolumeId}) {
-    if (!id->empty() && !hasData(*scene.node(*id))) id->clear(); // a volume without data is not written
-  }
-  if (!layers.empty()) xml += sliceViewElements(layers);
+  xml += sliceViewElements(scene);
   xml += "</MRML>\n";
   writeTextFileAtomically(mrmlPath, xml);
 }
