@@ -50,7 +50,7 @@ std::vector<NamedPoint> readMarkupsJson(const fs::path& path)
   return points;
 }
 
-void writeMarkupsJson(const std::vector<NamedPoint>& points, const fs::path& path)
+void writeMarkupsJson(const std::vector<NamedPoint>& points, const fs::path& path, bool locked)
 {
   json controlPoints = json::array();
   int id = 1;
@@ -62,7 +62,7 @@ void writeMarkupsJson(const std::vector<NamedPoint>& points, const fs::path& pat
                              {"position", {point.position[0], point.position[1], point.position[2]}},
                              {"orientation", {-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0}},
                              {"selected", true},
-                             {"locked", false},
+                             {"locked", locked},
                              {"visibility", true},
                              {"positionStatus", "defined"}});
   }
@@ -72,7 +72,7 @@ void writeMarkupsJson(const std::vector<NamedPoint>& points, const fs::path& pat
      {{{"type", "Fiducial"},
        {"coordinateSystem", "LPS"},
        {"coordinateUnits", "mm"},
-       {"locked", false},
+       {"locked", locked},
        {"fixedNumberOfControlPoints", false},
        {"labelFormat", "%N-%d"},
        {"lastUsedControlPointNumber", static_cast<int>(points.size())},

@@ -191,6 +191,10 @@ void Scene::remove(const std::string& id)
   for (auto& n : nodes_) {
     if (n->parentTransformId() == id) n->setParentTransformId(removed->parentTransformId());
   }
+  for (std::string* layer : {&sliceViewLayers_.backgroundVolumeId, &sliceViewLayers_.foregroundVolumeId,
+                             &sliceViewLayers_.labelVolumeId}) {
+    if (*layer == id) layer->clear();
+  }
   nodes_.erase(std::find(nodes_.begin(), nodes_.end(), removed));
   notify(SceneEventType::NodeRemoved, removed.get());
   removed->scene_ = nullptr;
@@ -208,6 +212,18 @@ std::shared_ptr<Node> Scene::node(const std::string& id) const
     if (n->id() == id) return n;
   }
   return nullptr;
+}
+
+void Scene::setSliceViewLayers(const SliceViewLayers& layers)
+{
+  for (const std::string& id : {layers.backgroundVolumeId, layers.foregroundVolumeId, layers.labelVolumeId}) {
+    if (id.empty()) continue;
+    const auto volume = node(id);
+    if (!volume || (volume->kind() != NodeKind::ScalarVolume && volume->kind() != NodeKind::LabelMapVolume)) {
+      throw std::invalid_argument("slice view layer '" + id + "' is not a volume of the scene");
+    }
+  }
+  sliceViewLayers_ = layers;
 }
 
 Scene::ObserverId Scene::addObserver(Observer observer)

@@ -23,6 +23,18 @@ struct SceneEvent {
   bool dataChanged;  ///< NodeModified: the data (not only display or name) changed
 };
 
+/// What the slice views show on load (3D Slicer's slice composite nodes, the same for the Red,
+/// Yellow and Green views): volume ids of this scene, empty for an empty layer.
+struct SliceViewLayers {
+  std::string backgroundVolumeId;
+  std::string foregroundVolumeId;
+  double foregroundOpacity = 0.5;
+  std::string labelVolumeId;
+  double labelOpacity = 0.6;
+
+  bool empty() const { return backgroundVolumeId.empty() && foregroundVolumeId.empty() && labelVolumeId.empty(); }
+};
+
 class Scene {
 public:
   using Observer = std::function<void(const SceneEvent&)>;
@@ -70,6 +82,11 @@ public:
     return nullptr;
   }
 
+  /// The slice views' layers. Setting refuses an id that is not a volume of this scene; removing
+  /// a node empties the layers that showed it.
+  const SliceViewLayers& sliceViewLayers() const { return sliceViewLayers_; }
+  void setSliceViewLayers(const SliceViewLayers& layers);
+
   ObserverId addObserver(Observer observer);
   void removeObserver(ObserverId id);
 
@@ -81,6 +98,7 @@ private:
   std::vector<std::pair<ObserverId, Observer>> observers_;
   ObserverId nextObserverId_ = 1;
   std::map<std::string, int> idCounters_;
+  SliceViewLayers sliceViewLayers_;
 };
 
 } // namespace brainshift

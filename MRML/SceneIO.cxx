@@ -303,6 +303,78 @@ std::string storageElement(const char* tag, const std::string& id, const std::st
   return e.str();
 }
 
+/// Landmark pairs are measured truth: locked in the scene and in their .mrk.json files alike (Slicer
+/// applies the file's lock over the scene's), so a click in a view cannot move them.
+constexpr bool LandmarkPairsLocked = true;
+
+/// The layout node (Four-Up) and the slice composite nodes of the Red, Yellow and Green views, as
+/// 3D Slicer 5 writes them (vtkMRMLLayoutNode, vtkMRMLSliceCompositeNode): the views show these
+/// volumes on load. The volume references are written both as `references` roles (Slicer 5) and as
+/// the legacy `backgroundVolumeID` attributes (Slicer 4), which Slicer 5 reads when the role is absent.
+/// Nothing when the scene has no layers; a layer whose volume has no data (not written) is empty.
+std::string sliceViewElements(const Scene& scene)
+{
+  SliceViewLayers layers = scene.sliceViewLayers();
+  for (std::string* id : {&layers.backgroundVolumeId, &layers.foregroundVolumeId, &layers.labelVolumeId}) {
+    if (!id->empty() && !hasData(*scene.node(*id))) id->clear();
+  }
+  if (layers.empty()) return "";
+  Element layout("Layout");
+  layout.set("id", "vtkMRMLLayoutNodevtkMRMLLayoutNode").set("name", "Layout").set("hideFromEditors", true);
+  layout.set("singletonTag", "vtkMRMLLayoutNode").set("currentViewArrangement", "3"); // SlicerLayoutFourUpView
+  std::string xml = layout.str();
+  std::string references;
+  const std::pair<const char*, const std::string*> roles[] = {{"backgroundVolume", &layers.backgroundVolumeId},
+                                                              {"foregroundVolume", &layers.foregroundVolumeId},
+                                                              {"labelVolume", &layers.labelVolumeId}};
+  for (const auto& [role, id] : roles) {
+    if (!id->empty()) references += std::string(role) + ":" + *id + ";";
+  }
+  for (const char* view : {"Red", "Yellow", "Green"}) {
+    Element composite("SliceComposite");
+    composite.set("id", std::string("vtkMRMLSliceCompositeNode") + view).set("name", "SliceComposite");
+    composite.set("hideFromEditors", true).set("singletonTag", view).set("references", references);
+    for (const auto& [role, id] : roles) composite.set(std::string(role) + "ID", *id);
+    composite.set("compositing", "0").set("foregroundOpacity", layers.foregroundOpacity);
+    composite.set("labelOpacity", layers.labelOpacity).set("fiducialVisibility", "1").set("fiducialLabelVisibility", "1");
+    composite.set("layoutName", view).set("doPropagateVolumeSelection", "1");
+    xml += composite.str();
+  }
+  return xml;
+}
+
+/// A landmark pair set as two point lists ("<name>_preop", "<name>_intraop"), each a .mrk.json file
+/// and its MarkupsFiducial, display and storage elements. The preoperative points live in the
+/// preoperative frame, under the node's transform.
+std::string landmarkListElements(LandmarksNode& node, const std::string& transformId, WriteContext& context)
+{
+  std::string xml;
+  for (const char* side : {"preop", "intraop"}) {
+    const bool preop = std::string(side) == "preop";
+    std::vector<NamedPoint> points;
+    for (const LandmarkPair& pair : node.pairs()) points.push_back({pair.name, preop ? pair.preop : pair.intraop});
+    const fs::path file = context.newDataFile(node.name() + "_" + side, ".mrk.json");
+    writeMarkupsJson(points, file, LandmarkPairsLocked);
+    const std::string listId = node.id() + (preop ? "_preop" : "_intraop");
+    const std::string displayId = "vtkMRMLMarkupsDisplayNode" + std::to_string(++context.displayCounter);
+    const std::string storageId = "vtkMRMLMarkupsJsonStorageNode" + std::to_string(++context.storageCounter);
+    auto attributes = attributesWithRole(node);
+    attributes[PairsAttribute] = node.name();
+    attributes[SideAttribute] = side;
+    Element list = commonElement("MarkupsFiducial", listId, node.name() + " " + side, attributes,
+                                 referencesOf(displayId, storageId, preop ? transformId : ""));
+    list.set("locked", LandmarkPairsLocked).set("controlPointLabelFormat", "%N-%d");
+    xml += list.str();
+    Element display("MarkupsDisplay");
+    display.set("id", displayId).set("name", "MarkupsDisplay").set("hideFromEditors", true).set("visibility", true);
+    display.set("color", preop ? "0.4 1 1" : "1 1 0.4").set("selectedColor", preop ? "0.2 0.8 1" : "1 0.8 0.2");
+    display.set("pointLabelsVisibility", true); // each point shows its name
+    xml += display.str();
+    xml += storageElement("MarkupsJsonStorage", storageId, context.relative(file), true);
+  }
+  return xml;
+}
+
 } // namespace
 
 std::string slicerColorNodeId(const std::string& colorTable)
@@ -347,31 +419,7 @@ void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions&
       !node.parentTransformId().empty() && scene.node(node.parentTransformId()) ? node.parentTransformId() : "";
 
     if (node.kind() == NodeKind::Landmarks) {
-      auto& landmarks = static_cast<LandmarksNode&>(node);
-      for (const char* side : {"preop", "intraop"}) {
-        const bool preop = std::string(side) == "preop";
-        std::vector<NamedPoint> points;
-        for (const LandmarkPair& pair : landmarks.pairs()) points.push_back({pair.name, preop ? pair.preop : pair.intraop});
-        const fs::path file = context.newDataFile(node.name() + "_" + side, ".mrk.json");
-        writeMarkupsJson(points, file);
-        const std::string suffix = std::string(side) == "preop" ? "_preop" : "_intraop";
-        const std::string listId = node.id() + suffix;
-        const std::string displayId = "vtkMRMLMarkupsDisplayNode" + std::to_string(++context.displayCounter);
-        const std::string storageId = "vtkMRMLMarkupsJsonStorageNode" + std::to_string(++context.storageCounter);
-        auto attributes = attributesWithRole(node);
-        attributes[PairsAttribute] = node.name();
-        attributes[SideAttribute] = side;
-        // Preoperative points live in the preoperative frame, under the node's transform.
-        Element list = commonElement("MarkupsFiducial", listId, node.name() + " " + side, attributes,
-                                     referencesOf(displayId, storageId, preop ? transformId : ""));
-        list.set("locked", true).set("controlPointLabelFormat", "%N-%d");
-        xml += list.str();
-        Element display("MarkupsDisplay");
-        display.set("id", displayId).set("name", "MarkupsDisplay").set("hideFromEditors", true).set("visibility", true);
-        display.set("color", preop ? "0.4 1 1" : "1 1 0.4").set("selectedColor", preop ? "0.2 0.8 1" : "1 0.8 0.2");
-        xml += display.str();
-        xml += storageElement("MarkupsJsonStorage", storageId, context.relative(file), true);
-      }
+      xml += landmarkListElements(static_cast<LandmarksNode&>(node), transformId, context);
       node.markStored();
       continue;
     }
@@ -448,6 +496,7 @@ void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions&
     case NodeKind::Landmarks: break;
     }
   }
+  xml += sliceViewElements(scene);
   xml += "</MRML>\n";
   writeTextFileAtomically(mrmlPath, xml);
 }
@@ -532,6 +581,26 @@ ModelDisplay readModelDisplay(const ParsedElement* e)
     if (range >> r[0] >> r[1]) display.scalarRange = r;
   }
   return display;
+}
+
+/// The layers of the Red slice view, with the ids of the file; nothing when the file has none.
+std::optional<SliceViewLayers> readSliceViewLayers(const std::map<std::string, ParsedElement>& byId)
+{
+  for (const auto& [id, e] : byId) {
+    if (e.tag != "SliceComposite" || e.get("layoutName") != "Red") continue;
+    auto volumeOf = [&e](const std::string& role) {
+      const auto ids = e.references(role);
+      return ids.empty() ? e.get(role + "ID") : ids.front();
+    };
+    SliceViewLayers layers;
+    layers.backgroundVolumeId = volumeOf("backgroundVolume");
+    layers.foregroundVolumeId = volumeOf("foregroundVolume");
+    layers.labelVolumeId = volumeOf("labelVolume");
+    if (auto opacity = optionalNumber(e, "foregroundOpacity")) layers.foregroundOpacity = *opacity;
+    if (auto opacity = optionalNumber(e, "labelOpacity")) layers.labelOpacity = *opacity;
+    return layers;
+  }
+  return std::nullopt;
 }
 
 } // namespace
@@ -688,6 +757,15 @@ void readScene(Scene& scene, const fs::path& mrmlPath)
   for (auto& [oldId, node] : loaded) {
     auto parent = parentOf.find(oldId);
     if (parent != parentOf.end() && newIdOf.count(parent->second)) node->setParentTransformId(newIdOf[parent->second]);
+  }
+  if (auto layers = readSliceViewLayers(byId)) {
+    for (std::string* id : {&layers->backgroundVolumeId, &layers->foregroundVolumeId, &layers->labelVolumeId}) {
+      // A layer showing a node that was not read (or is no volume) stays empty.
+      const auto node = newIdOf.count(*id) ? scene.node(newIdOf[*id]) : nullptr;
+      const bool volume = node && (node->kind() == NodeKind::ScalarVolume || node->kind() == NodeKind::LabelMapVolume);
+      *id = volume ? node->id() : std::string();
+    }
+    scene.setSliceViewLayers(*layers);
   }
 }
 

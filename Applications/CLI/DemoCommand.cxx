@@ -98,6 +98,11 @@ void writeCaseScene(const SimulatedCase& simulated, const CaseFiles& files)
   auto landmarks = scene.add(LandmarksNode::create("landmarks", simulated.landmarks));
   landmarks->setRole("truth");
   landmarks->setParentTransformId(truth->id());
+  // Slicer opens on the intraoperative scan with the true intraoperative labels over it.
+  SliceViewLayers layers;
+  layers.backgroundVolumeId = intraop->id();
+  layers.labelVolumeId = truthLabels->id();
+  scene.setSliceViewLayers(layers);
   writeScene(scene, files.folder / "scene.mrml");
 }
 

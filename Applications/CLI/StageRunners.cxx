@@ -621,8 +621,11 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   auto whole = scene.add(stored(TransformNode::create(wholeName, wholeTransform), context.output("intraop_to_preop.h5")));
   auto intraop = scene.add(stored(ScalarVolumeNode::create("intraop image", shared(context.intraopImage("warp"))), o.intraopImage));
   intraop->setRole("intraop");
+  std::string warpedImageId, firstOverlayId;
   for (const auto& [name, file, image] : warpedScalars) {
     auto node = scene.add(stored(ScalarVolumeNode::create(name, image), file));
+    if (name == "warped preop image") warpedImageId = node->id();
+    else if (name != UncertaintyMapName && firstOverlayId.empty()) firstOverlayId = node->id();
     // On the intraoperative grid: the warped image is "warped" (not a moving image for the rigid
     // registration), the warped statistics and angiograms overlays.
     node->setRole(name == "warped preop image" ? "warped" : "overlay");
@@ -644,6 +647,12 @@ void writeUpdateScene(RunContext& context, const std::vector<std::tuple<std::str
   display.colorTable = "ColdToHotRainbow";
   surface->setDisplay(display);
   surface->setParentTransformId(rigid->id());
+  // Slicer opens on the scan with the first warped overlay (else the warped image) and labels over it.
+  SliceViewLayers layers;
+  layers.backgroundVolumeId = intraop->id();
+  layers.foregroundVolumeId = firstOverlayId.empty() ? warpedImageId : firstOverlayId;
+  layers.labelVolumeId = labels->id();
+  scene.setSliceViewLayers(layers);
   writeScene(scene, context.output("scene.mrml"));
 }
 

@@ -48,6 +48,28 @@ DemoSmallCase)
   rm -rf "$demo"
   mkdir -p "$work"
   "$brainshift" demo --size small --output-dir "$demo" || fail "demo exited $?"
+  # The case scene opens on the intraoperative scan; its landmark lists are locked in the scene
+  # and in their .mrk.json files alike, and show their names.
+  python3 - "$demo/case/scene.mrml" <<'PY' || fail "case/scene.mrml does not open on the intraoperative scan"
+import json, os, sys, xml.etree.ElementTree as ET
+scene = sys.argv[1]
+root = ET.parse(scene).getroot()
+by_id = {e.get("id"): e for e in root}
+refs = lambda e: dict(r.split(":", 1) for r in e.get("references", "").split(";") if ":" in r)
+composites = root.findall("SliceComposite")
+assert sorted(c.get("layoutName") for c in composites) == ["Green", "Red", "Yellow"], composites
+for c in composites:
+    background = by_id[refs(c)["backgroundVolume"]]
+    storage = by_id[refs(background)["storage"]]
+    assert os.path.basename(storage.get("fileName")) == "intraop_image.nii.gz", storage.get("fileName")
+lists = root.findall("MarkupsFiducial")
+assert len(lists) == 2, lists
+for m in lists:
+    assert m.get("locked") == "true", m.get("locked")
+    assert by_id[refs(m)["display"]].get("pointLabelsVisibility") == "true"
+    markup = json.load(open(os.path.join(os.path.dirname(scene), by_id[refs(m)["storage"]].get("fileName"))))["markups"][0]
+    assert markup["locked"] is True and all(p["locked"] is True for p in markup["controlPoints"]), markup["locked"]
+PY
   ;;
 
 HelpEverywhere)
@@ -297,6 +319,25 @@ missing = [f for f in files if not os.path.exists(os.path.join(os.path.dirname(s
 assert not missing, missing
 for needed in ("warped_preop_image.nii.gz", "brain_surface.vtp", "intraop_to_preop.h5"):
     assert needed in text, needed
+PY
+  # Slicer opens it fused: Four-Up, each slice view on the scan with the warped fMRI and labels over it.
+  python3 - "$out/scene.mrml" "$case_dir/intraop_image.nii.gz" <<'PY' || fail "scene.mrml does not open fused"
+import os, sys, xml.etree.ElementTree as ET
+scene, intraop = sys.argv[1:]
+root = ET.parse(scene).getroot()
+by_id = {e.get("id"): e for e in root}
+refs = lambda e: dict(r.split(":", 1) for r in e.get("references", "").split(";") if ":" in r)
+file_of = lambda volume: os.path.realpath(os.path.join(os.path.dirname(scene), by_id[refs(volume)["storage"]].get("fileName")))
+assert [l.get("currentViewArrangement") for l in root.findall("Layout")] == ["3"]
+composites = root.findall("SliceComposite")
+assert sorted(c.get("layoutName") for c in composites) == ["Green", "Red", "Yellow"], composites
+for c in composites:
+    r = refs(c)
+    assert file_of(by_id[r["backgroundVolume"]]) == os.path.realpath(intraop), file_of(by_id[r["backgroundVolume"]])
+    assert os.path.basename(file_of(by_id[r["foregroundVolume"]])) == "warped_fmri.nii.gz"
+    assert by_id[r["labelVolume"]].tag == "LabelMapVolume"
+    assert os.path.basename(file_of(by_id[r["labelVolume"]])) == "warped_preop_labels.nii.gz"
+    assert 0.3 <= float(c.get("foregroundOpacity")) <= 0.7
 PY
   # The whole update against the truth: better than the rigid part alone.
   "$brainshift" evaluate --transform "$out/intraop_to_preop.h5" --landmarks "$case_dir/landmarks.csv" --json "$out/tre.json" \
