@@ -24,26 +24,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configuration, bool tumourResected)
-{
-  const Configuration::BlockMatching& c = configuration.blockMatching;
-  BlockMatchingParameters p;
-  p.blockHalfSizeMm = c.blockHalfSizeMm;
-  p.blockSpacingMm = c.blockSpacingMm;
-  p.selectedShare = c.selectedShare;
-  p.maximumBlocks = std::size_t(c.maximumBlocks);
-  p.searchRadiusMm = c.searchRadiusMm;
-  p.minimumSimilarity = c.minimumSimilarity;
-  if (tumourResected) p.excludedLabels = {4}; // its tissue is gone from the scan
-  return p;
-}
-
-SoftConstraintRejection rejectionFrom(const Configuration& configuration)
-{
-  const Configuration::BlockMatching& c = configuration.blockMatching;
-  return {int(c.rejectionRounds), c.rejectionFraction, c.outlierFactor, c.rejectionFloorMm};
-}
-
 /// The matches as points (preoperative frame) for inspection: what was found, what was predicted,
 /// how similar, whether the solve kept it and its misfit there.
 void writeMatches(const std::vector<BlockMatch>& matches, const ImageMatchConstraints& constraints, const FiniteElementResult& result,
@@ -80,22 +60,6 @@ void writeMatches(const std::vector<BlockMatch>& matches, const ImageMatchConstr
   writeModel(polyData, file);
 }
 
-/// Root mean square of |u(p) - target| over the constraints under the nodal displacements.
-double rmsMisfit(const FiniteElementJob& job, const std::vector<SoftConstraint>& constraints, const std::vector<double>& displacements)
-{
-  if (constraints.empty()) return 0;
-  double sum = 0;
-  for (const SoftConstraint& c : constraints) {
-    double r[3] = {-c.target[0], -c.target[1], -c.target[2]};
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t node = std::size_t(job.tetrahedra[4 * std::size_t(c.tetrahedron) + std::size_t(k)]);
-      for (int d = 0; d < 3; ++d) r[d] += c.weights[std::size_t(k)] * displacements[3 * node + std::size_t(d)];
-    }
-    sum += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-  }
-  return std::sqrt(sum / double(constraints.size()));
-}
-
 } // namespace
 
 std::optional<std::string> imageMatchingUnavailable(RunContext& context)
@@ -111,9 +75,9 @@ std::optional<std::string> imageMatchingUnavailable(RunContext& context)
   return std::nullopt;
 }
 
-FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGrid* mesh, const FiniteElementJob& job,
-                                          const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry,
-                                          DisplacementEvidence& evidence)
+FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid* mesh, const FiniteElementJob& job,
+                                        const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry,
+                                        DisplacementEvidence& evidence)
 {
   Stopwatch clock;
   const Configuration& configuration = context.configuration();
@@ -121,30 +85,23 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   const LabelImage::Pointer intraopLabels = readLabelVolume(labelsFile);
-  const bool tumourResected = context.report().hasStage("classify") && context.report().stage("classify").value("tumour_resected", false);
-  const MeshPointLocator locator(mesh);
-  const DisplacementPrediction prediction = [&](const PhysicalPoint& x) {
-    return locator.interpolate(surfaceOnly.displacements, x).value_or(std::array<double, 3>{0, 0, 0});
-  };
-  BlockMatchingParameters parameters = blockMatchingParametersFrom(configuration, tumourResected);
-  parameters.largestPredictedMm = 0;
-  for (std::size_t i = 0; i + 2 < surfaceOnly.displacements.size(); i += 3) {
-    parameters.largestPredictedMm = std::max(parameters.largestPredictedMm, std::sqrt(std::pow(surfaceOnly.displacements[i], 2) +
-                                                                                       std::pow(surfaceOnly.displacements[i + 1], 2) +
-                                                                                       std::pow(surfaceOnly.displacements[i + 2], 2)));
-  }
-  parameters.largestPredictedMm = std::min(parameters.largestPredictedMm, 200.0);
-  const BlockMatchingResult matching =
-    matchBlocks(context.preopImage("simulate"), context.preopLabels("simulate"), context.intraopImage("simulate"), *intraopLabels, *rigid,
-                prediction, parameters);
-  const ImageMatchConstraints constraints = softConstraintsFromMatches(locator, matching.matches, configuration.blockMatching.stiffnessNPerMm);
+  ImageDrivenSolveInputs inputs;
+  inputs.preopImage = &context.preopImage("simulate");
+  inputs.preopLabels = &context.preopLabels("simulate");
+  inputs.intraopImage = &context.intraopImage("simulate");
+  inputs.intraopLabels = intraopLabels.GetPointer();
+  inputs.rigidIntraopToPreop = rigid.GetPointer();
+  inputs.tumourResected = context.report().hasStage("classify") && context.report().stage("classify").value("tumour_resected", false);
+  const ImageDrivenSolve solved = brainshift::solveWithImageMatches(mesh, job, surfaceOnly, inputs, configuration, solve);
+  const BlockMatchingResult& matching = solved.matching;
   entry = {{"enabled", true},
+           {"used", solved.used},
            {"candidates", matching.candidates},
            {"selected", matching.selected},
            {"matched", matching.matches.size()},
            {"dropped", {{"low_similarity", matching.lowSimilarity}, {"outside_brain", matching.outsideBrain}, {"at_search_edge", matching.atSearchEdge}}},
-           {"constraints", constraints.constraints.size()},
-           {"excluded_labels", tumourResected ? std::vector<int>{4} : std::vector<int>{}},
+           {"constraints", solved.constraints.constraints.size()},
+           {"excluded_labels", inputs.tumourResected ? std::vector<int>{4} : std::vector<int>{}},
            {"remap_correlation_ratio", matching.remapCorrelationRatio},
            {"remap_seconds", matching.remapSeconds},
            {"selection_seconds", matching.selectionSeconds},
@@ -153,46 +110,26 @@ FiniteElementResult solveWithImageMatches(RunContext& context, vtkUnstructuredGr
   std::printf("  simulate: %zu of %zu blocks matched (%zu low similarity, %zu outside the brain, %zu at the search edge) in %.2f s\n",
               matching.matches.size(), matching.selected, matching.lowSimilarity, matching.outsideBrain, matching.atSearchEdge,
               matching.remapSeconds + matching.selectionSeconds + matching.matchingSeconds);
-  if (constraints.constraints.empty()) {
-    entry["used"] = false;
-    entry["wall_seconds"] = clock.seconds();
-    return surfaceOnly;
-  }
-  FiniteElementJob constrained = job;
-  constrained.softConstraints = constraints.constraints;
-  constrained.rejection = rejectionFrom(configuration);
-  const std::size_t matchConstraints = constrained.softConstraints.size();
-  const FiniteElementResult result = solve(constrained);
-  std::size_t kept = 0;
-  for (std::uint8_t k : result.softConstraintKept) kept += k;
-  double change = 0;
-  for (std::size_t i = 0; i + 2 < result.displacements.size(); i += 3) {
-    change += std::sqrt(std::pow(result.displacements[i] - surfaceOnly.displacements[i], 2) +
-                        std::pow(result.displacements[i + 1] - surfaceOnly.displacements[i + 1], 2) +
-                        std::pow(result.displacements[i + 2] - surfaceOnly.displacements[i + 2], 2));
-  }
-  entry["used"] = true;
-  entry["kept"] = kept;
-  entry["rejected"] = matchConstraints - kept;
-  entry["solves"] = result.keptPerRound.size();
-  entry["kept_per_solve"] = result.keptPerRound;
-  entry["rms_misfit_surface_only_mm"] = rmsMisfit(job, constraints.constraints, surfaceOnly.displacements);
-  entry["rms_misfit_per_solve_mm"] = result.rmsMisfitPerRoundMm;
-  entry["mean_node_change_mm"] = change / double(std::max<std::size_t>(1, result.displacements.size() / 3));
-  entry["solve_seconds"] = result.setupSeconds + result.solveSeconds;
-  writeMatches(matching.matches, constraints, result, context.output("block_matches.vtp"));
-  for (std::size_t c = 0; c < matchConstraints && c < result.softConstraintMisfitMm.size(); ++c) {
-    const PhysicalPoint& x = matching.matches[constraints.matchOfConstraint[c]].centre;
-    const std::array<double, 3> point{x[0], x[1], x[2]};
-    if (result.softConstraintKept[c]) evidence.points.push_back(point);
-    evidence.misfitPoints.push_back(point);
-    evidence.misfitsMm.push_back(result.softConstraintMisfitMm[c]);
+  if (solved.used) {
+    const FiniteElementResult& result = solved.result;
+    std::size_t kept = 0;
+    for (std::uint8_t k : result.softConstraintKept) kept += k;
+    entry["kept"] = kept;
+    entry["rejected"] = solved.constraints.constraints.size() - kept;
+    entry["solves"] = result.keptPerRound.size();
+    entry["kept_per_solve"] = result.keptPerRound;
+    entry["rms_misfit_surface_only_mm"] = solved.rmsMisfitSurfaceOnlyMm;
+    entry["rms_misfit_per_solve_mm"] = result.rmsMisfitPerRoundMm;
+    entry["mean_node_change_mm"] = solved.meanNodeChangeMm;
+    entry["solve_seconds"] = result.setupSeconds + result.solveSeconds;
+    writeMatches(matching.matches, solved.constraints, result, context.output("block_matches.vtp"));
+    evidence = solved.evidence;
+    std::printf("  simulate: %zu of %zu matches kept after %zu solves; misfit %.2f mm (surface alone) -> %.2f mm (kept)\n", kept,
+                solved.constraints.constraints.size(), result.keptPerRound.size(), solved.rmsMisfitSurfaceOnlyMm,
+                result.rmsMisfitPerRoundMm.empty() ? 0.0 : result.rmsMisfitPerRoundMm.back());
   }
   entry["wall_seconds"] = clock.seconds();
-  std::printf("  simulate: %zu of %zu matches kept after %zu solves; misfit %.2f mm (surface alone) -> %.2f mm (kept)\n", kept,
-              constraints.constraints.size(), result.keptPerRound.size(), entry["rms_misfit_surface_only_mm"].get<double>(),
-              result.rmsMisfitPerRoundMm.empty() ? 0.0 : result.rmsMisfitPerRoundMm.back());
-  return result;
+  return solved.result;
 }
 
 } // namespace brainshift::cli

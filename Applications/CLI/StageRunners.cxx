@@ -367,7 +367,7 @@ void runSimulateStage(RunContext& context)
       return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
                                     constrained.rejection);
     };
-    result = solveWithImageMatches(context, mesh, job, surfaceOnly, solve, blockMatching, evidence);
+    result = runImageDrivenSolve(context, mesh, job, surfaceOnly, solve, blockMatching, evidence);
   }
   attachDisplacements(mesh, result);
   attachUncertainty(mesh, job, result, evidence);

@@ -220,6 +220,17 @@ void FiniteElementJob::validateSoftConstraints(std::size_t tetrahedra) const
   if (!(r.floorMm >= 0) || !std::isfinite(r.floorMm)) throw std::invalid_argument("soft constraint rejection: the floor must be finite and >= 0 mm");
 }
 
+std::array<double, 3> softConstraintResidual(const FiniteElementJob& mesh, const SoftConstraint& constraint,
+                                             const std::vector<double>& displacements)
+{
+  std::array<double, 3> r{-constraint.target[0], -constraint.target[1], -constraint.target[2]};
+  for (std::size_t k = 0; k < 4; ++k) {
+    const std::size_t node = std::size_t(mesh.tetrahedra[4 * std::size_t(constraint.tetrahedron) + k]);
+    for (std::size_t d = 0; d < 3; ++d) r[d] += constraint.weights[k] * displacements[3 * node + d];
+  }
+  return r;
+}
+
 void writeFiniteElementJob(const FiniteElementJob& job, const fs::path& path)
 {
   Writer w(path);

@@ -86,6 +86,10 @@ struct FiniteElementResult {
   std::vector<double> rmsMisfitPerRoundMm;
 };
 
+/// u(p) - target of a soft constraint under nodal displacements (3 per node of `mesh`), mm.
+std::array<double, 3> softConstraintResidual(const FiniteElementJob& mesh, const SoftConstraint& constraint,
+                                             const std::vector<double>& displacements);
+
 /// Binary, little-endian, with a magic and a version; atomic write.
 void writeFiniteElementJob(const FiniteElementJob& job, const std::filesystem::path& path);
 FiniteElementJob readFiniteElementJob(const std::filesystem::path& path);

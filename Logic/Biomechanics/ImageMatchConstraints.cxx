@@ -5,6 +5,8 @@
 #include <vtkStaticCellLocator.h>
 
 #include <algorithm>
+#include <cmath>
+#include <stdexcept>
 
 namespace brainshift {
 
@@ -78,6 +80,94 @@ ImageMatchConstraints softConstraintsFromMatches(const MeshPointLocator& locator
     result.matchOfConstraint.push_back(m);
   }
   return result;
+}
+
+BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configuration, bool tumourResected)
+{
+  const Configuration::BlockMatching& c = configuration.blockMatching;
+  BlockMatchingParameters p;
+  p.blockHalfSizeMm = c.blockHalfSizeMm;
+  p.blockSpacingMm = c.blockSpacingMm;
+  p.selectedShare = c.selectedShare;
+  p.maximumBlocks = std::size_t(c.maximumBlocks);
+  p.searchRadiusMm = c.searchRadiusMm;
+  p.minimumSimilarity = c.minimumSimilarity;
+  if (tumourResected) p.excludedLabels = {4};
+  return p;
+}
+
+SoftConstraintRejection softConstraintRejectionFrom(const Configuration& configuration)
+{
+  const Configuration::BlockMatching& c = configuration.blockMatching;
+  return {int(c.rejectionRounds), c.rejectionFraction, c.outlierFactor, c.rejectionFloorMm};
+}
+
+namespace {
+double largestDisplacement(const std::vector<double>& displacements)
+{
+  double largest = 0;
+  for (std::size_t i = 0; i + 2 < displacements.size(); i += 3) {
+    largest = std::max(largest, std::sqrt(displacements[i] * displacements[i] + displacements[i + 1] * displacements[i + 1] +
+                                          displacements[i + 2] * displacements[i + 2]));
+  }
+  return largest;
+}
+
+double rmsMisfit(const FiniteElementJob& job, const std::vector<SoftConstraint>& constraints, const std::vector<double>& displacements)
+{
+  if (constraints.empty()) return 0;
+  double sum = 0;
+  for (const SoftConstraint& c : constraints) {
+    const std::array<double, 3> r = softConstraintResidual(job, c, displacements);
+    sum += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+  }
+  return std::sqrt(sum / double(constraints.size()));
+}
+
+double meanChange(const std::vector<double>& a, const std::vector<double>& b)
+{
+  double sum = 0;
+  for (std::size_t i = 0; i + 2 < a.size(); i += 3) {
+    sum += std::sqrt((a[i] - b[i]) * (a[i] - b[i]) + (a[i + 1] - b[i + 1]) * (a[i + 1] - b[i + 1]) + (a[i + 2] - b[i + 2]) * (a[i + 2] - b[i + 2]));
+  }
+  return sum / double(std::max<std::size_t>(1, a.size() / 3));
+}
+} // namespace
+
+ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& surfaceOnly,
+                                       const ImageDrivenSolveInputs& in, const Configuration& configuration,
+                                       const ConstrainedSolve& solve)
+{
+  if (!mesh || !in.preopImage || !in.preopLabels || !in.intraopImage || !in.intraopLabels || !in.rigidIntraopToPreop || !solve) {
+    throw std::invalid_argument("image-driven solve: the mesh, both images, both label maps, the rigid transform and a solver are needed");
+  }
+  ImageDrivenSolve out;
+  out.result = surfaceOnly;
+  const MeshPointLocator locator(mesh);
+  const DisplacementPrediction prediction = [&](const PhysicalPoint& x) {
+    return locator.interpolate(surfaceOnly.displacements, x).value_or(std::array<double, 3>{0, 0, 0});
+  };
+  BlockMatchingParameters parameters = blockMatchingParametersFrom(configuration, in.tumourResected);
+  parameters.largestPredictedMm = std::min(largestDisplacement(surfaceOnly.displacements), 200.0);
+  out.matching = matchBlocks(*in.preopImage, *in.preopLabels, *in.intraopImage, *in.intraopLabels, *in.rigidIntraopToPreop, prediction,
+                             parameters);
+  out.constraints = softConstraintsFromMatches(locator, out.matching.matches, configuration.blockMatching.stiffnessNPerMm);
+  if (out.constraints.constraints.empty()) return out;
+  FiniteElementJob constrained = job;
+  constrained.softConstraints = out.constraints.constraints;
+  constrained.rejection = softConstraintRejectionFrom(configuration);
+  out.result = solve(constrained);
+  out.used = true;
+  out.rmsMisfitSurfaceOnlyMm = rmsMisfit(job, out.constraints.constraints, surfaceOnly.displacements);
+  out.meanNodeChangeMm = meanChange(out.result.displacements, surfaceOnly.displacements);
+  for (std::size_t c = 0; c < out.constraints.constraints.size() && c < out.result.softConstraintMisfitMm.size(); ++c) {
+    const PhysicalPoint& x = out.matching.matches[out.constraints.matchOfConstraint[c]].centre;
+    const std::array<double, 3> point{x[0], x[1], x[2]};
+    if (out.result.softConstraintKept[c]) out.evidence.points.push_back(point);
+    out.evidence.misfitPoints.push_back(point);
+    out.evidence.misfitsMm.push_back(out.result.softConstraintMisfitMm[c]);
+  }
+  return out;
 }
 
 } // namespace brainshift

@@ -5,6 +5,8 @@
 // directions its structure pins down. Also where points fall in the mesh and what a solved mesh
 // predicts there (the start of the matching).
 #include "BlockMatching.h"
+#include "Configuration.h"
+#include "DisplacementUncertainty.h"
 #include "FiniteElementJob.h"
 
 #include <vtkSmartPointer.h>
@@ -12,6 +14,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -47,5 +50,41 @@ struct ImageMatchConstraints {
 /// One constraint per match whose centre lies in the mesh (the others are left out).
 ImageMatchConstraints softConstraintsFromMatches(const MeshPointLocator& locator, const std::vector<BlockMatch>& matches,
                                                  double stiffnessNPerMm);
+
+/// The block matching and rejection settings of the configuration ("block_matching"); a tumour
+/// decided resected is excluded from the blocks (its tissue is gone from the scan).
+BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configuration, bool tumourResected);
+SoftConstraintRejection softConstraintRejectionFrom(const Configuration& configuration);
+
+/// What the image-driven second solve needs besides the mesh and the first solve.
+struct ImageDrivenSolveInputs {
+  const ScalarImage* preopImage = nullptr;
+  const LabelImage* preopLabels = nullptr;
+  const ScalarImage* intraopImage = nullptr;
+  const LabelImage* intraopLabels = nullptr; ///< the scan's classification
+  const SpatialTransform* rigidIntraopToPreop = nullptr;
+  bool tumourResected = false;
+};
+
+struct ImageDrivenSolve {
+  BlockMatchingResult matching;
+  ImageMatchConstraints constraints;
+  FiniteElementResult result;          ///< the surface-driven solution when no block matched
+  bool used = false;                   ///< a second solve ran
+  double rmsMisfitSurfaceOnlyMm = 0;   ///< the matches against the surface-driven solution
+  double meanNodeChangeMm = 0;         ///< the second solve against the first
+  /// The kept matches (points) and every match with its misfit, for the confidence map.
+  DisplacementEvidence evidence;
+};
+
+/// Solves a job (with soft constraints) as the caller solves: one-shot or in a served worker.
+using ConstrainedSolve = std::function<FiniteElementResult(const FiniteElementJob&)>;
+
+/// After Clatz et al. (2005): blocks matched from the surface-driven solution `surfaceOnly` of
+/// `job` on `mesh`, then `job` solved again through `solve` with the matches as soft constraints,
+/// the worst rejected in rounds. std::invalid_argument when an input is missing.
+ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& surfaceOnly,
+                                       const ImageDrivenSolveInputs& inputs, const Configuration& configuration,
+                                       const ConstrainedSolve& solve);
 
 } // namespace brainshift

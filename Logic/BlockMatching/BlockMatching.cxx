@@ -375,90 +375,93 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, Blo
   return Outcome::Matched;
 }
 
-} // namespace
+/// The matching grid and what lives on it: the preoperative image remapped into the scan's
+/// contrast, its labels, the scan and its classification brought over by the rigid transform.
+struct MatchingVolumes {
+  ScalarImage::Pointer grid;
+  Volume<float> remapped, intraop;
+  Volume<LabelPixel> preopLabels, intraopLabels;
+  std::vector<unsigned char> preopBrain;
+};
 
-BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
-                                const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
-                                const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters)
+MatchingVolumes prepareVolumes(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
+                               const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
+                               const BlockMatchingParameters& parameters, double& correlationRatio)
 {
-  requireSensible(parameters);
-  BlockMatchingResult result;
-  auto clock = Clock::now();
-  const ScalarImage::Pointer grid = matchingGrid(preopImage, preopLabels, parameters);
-  if (!grid) return result;
+  MatchingVolumes v;
+  v.grid = matchingGrid(preopImage, preopLabels, parameters);
+  if (!v.grid) return v;
   const auto preopToIntraop = rigidIntraopToPreop.GetInverseTransform();
   if (!preopToIntraop) throw std::invalid_argument("block matching: the rigid transform cannot be inverted");
   using LinearScalar = itk::LinearInterpolateImageFunction<ScalarImage, double>;
   using NearestLabel = itk::NearestNeighborInterpolateImageFunction<LabelImage, double>;
-  const Volume<float> preop = resampledOnto<ScalarImage, LinearScalar>(preopImage, *grid, nullptr);
-  const Volume<LabelPixel> preopGridLabels = resampledOnto<LabelImage, NearestLabel>(preopLabels, *grid, nullptr);
-  const Volume<float> intraop = resampledOnto<ScalarImage, LinearScalar>(intraopImage, *grid, preopToIntraop.GetPointer());
-  const Volume<LabelPixel> intraopGridLabels = resampledOnto<LabelImage, NearestLabel>(intraopLabels, *grid, preopToIntraop.GetPointer());
-  const std::size_t voxels = preop.values.size();
-  std::vector<char> preopBrain(voxels), brainInBoth(voxels);
+  v.remapped = resampledOnto<ScalarImage, LinearScalar>(preopImage, *v.grid, nullptr);
+  v.preopLabels = resampledOnto<LabelImage, NearestLabel>(preopLabels, *v.grid, nullptr);
+  v.intraop = resampledOnto<ScalarImage, LinearScalar>(intraopImage, *v.grid, preopToIntraop.GetPointer());
+  v.intraopLabels = resampledOnto<LabelImage, NearestLabel>(intraopLabels, *v.grid, preopToIntraop.GetPointer());
+  const std::size_t voxels = v.remapped.values.size();
+  std::vector<char> brainInBoth(voxels);
+  v.preopBrain.resize(voxels);
   for (std::size_t n = 0; n < voxels; ++n) {
-    preopBrain[n] = isBrain(parameters.brainLabels, preopGridLabels.values[n]);
-    brainInBoth[n] = preopBrain[n] && isBrain(parameters.brainLabels, intraopGridLabels.values[n]);
+    v.preopBrain[n] = isBrain(parameters.brainLabels, v.preopLabels.values[n]);
+    brainInBoth[n] = v.preopBrain[n] && isBrain(parameters.brainLabels, v.intraopLabels.values[n]);
   }
-  const IntensityRemap remap = learnRemap(preop, intraop, brainInBoth, result.remapCorrelationRatio);
-  Volume<float> remapped = preop;
-  for (float& v : remapped.values) v = float(remap(v));
-  result.remapSeconds = secondsSince(clock);
+  const IntensityRemap remap = learnRemap(v.remapped, v.intraop, brainInBoth, correlationRatio);
+  for (float& value : v.remapped.values) value = float(remap(value));
+  return v;
+}
 
-  // Candidates: lattice centres deep in the brain whose block holds no excluded tissue; the most
-  // structured share of them (variance of the remapped block) is matched.
-  clock = Clock::now();
+/// Lattice centres (every `stride` voxels) deep in the brain whose block holds no excluded tissue,
+/// the most structured share of them (variance of the remapped block) first. `found`: how many
+/// qualified before the share and the limit.
+std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h, int stride, const BlockMatchingParameters& parameters,
+                                                 std::size_t& found)
+{
   MaskImage::Pointer mask = MaskImage::New();
-  mask->CopyInformation(grid);
-  mask->SetRegions(grid->GetLargestPossibleRegion());
+  mask->CopyInformation(v.grid);
+  mask->SetRegions(v.grid->GetLargestPossibleRegion());
   mask->Allocate();
-  std::copy(preopBrain.begin(), preopBrain.end(), mask->GetBufferPointer());
+  std::copy(v.preopBrain.begin(), v.preopBrain.end(), mask->GetBufferPointer());
   const ScalarImage::Pointer distance = signedDistanceMm(mask);
   const float* signedDistance = distance->GetBufferPointer();
-  const GridGeometry geometry = geometryOf(*grid);
-  const double spacing = std::max({geometry.spacing[0], geometry.spacing[1], geometry.spacing[2]});
-  const int h = std::max(1, int(std::lround(parameters.blockHalfSizeMm / spacing)));
-  const int stride = std::max(1, int(std::lround(parameters.blockSpacingMm / spacing)));
-  std::vector<std::pair<double, std::array<int, 3>>> candidates;
-  for (int k = h + 1; k + h + 1 < remapped.size[2]; k += stride)
-    for (int j = h + 1; j + h + 1 < remapped.size[1]; j += stride)
-      for (int i = h + 1; i + h + 1 < remapped.size[0]; i += stride) {
-        if (-signedDistance[remapped.at(i, j, k)] < parameters.minimumDepthMm) continue;
+  const Volume<float>& image = v.remapped;
+  auto excludedAt = [&](std::size_t at) {
+    const auto& excluded = parameters.excludedLabels;
+    return std::find(excluded.begin(), excluded.end(), int(v.preopLabels.values[at])) != excluded.end();
+  };
+  std::vector<std::pair<double, std::array<int, 3>>> scored;
+  for (int k = h + 1; k + h + 1 < image.size[2]; k += stride)
+    for (int j = h + 1; j + h + 1 < image.size[1]; j += stride)
+      for (int i = h + 1; i + h + 1 < image.size[0]; i += stride) {
+        if (-signedDistance[image.at(i, j, k)] < parameters.minimumDepthMm) continue;
         bool excluded = false;
         double sum = 0, squares = 0, n = 0;
         for (int z = k - h; z <= k + h && !excluded; ++z)
           for (int y = j - h; y <= j + h && !excluded; ++y)
-            for (int x = i - h; x <= i + h; ++x) {
-              const std::size_t at = remapped.at(x, y, z);
-              if (std::find(parameters.excludedLabels.begin(), parameters.excludedLabels.end(), int(preopGridLabels.values[at])) !=
-                  parameters.excludedLabels.end()) {
-                excluded = true;
-                break;
-              }
-              sum += remapped.values[at];
-              squares += double(remapped.values[at]) * remapped.values[at];
+            for (int x = i - h; x <= i + h && !excluded; ++x) {
+              const std::size_t at = image.at(x, y, z);
+              excluded = excludedAt(at);
+              sum += image.values[at];
+              squares += double(image.values[at]) * image.values[at];
               n += 1;
             }
-        if (excluded) continue;
-        candidates.push_back({squares / n - (sum / n) * (sum / n), {i, j, k}});
+        if (!excluded) scored.push_back({squares / n - (sum / n) * (sum / n), {i, j, k}});
       }
-  result.candidates = candidates.size();
-  std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  std::size_t keep = std::min(parameters.maximumBlocks, std::size_t(std::ceil(parameters.selectedShare * double(candidates.size()))));
-  candidates.resize(std::min(keep, candidates.size()));
-  result.selected = candidates.size();
-  result.selectionSeconds = secondsSince(clock);
+  found = scored.size();
+  std::sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  const std::size_t keep = std::min(parameters.maximumBlocks, std::size_t(std::ceil(parameters.selectedShare * double(scored.size()))));
+  std::vector<std::array<int, 3>> candidates;
+  for (std::size_t c = 0; c < std::min(keep, scored.size()); ++c) candidates.push_back(scored[c].second);
+  return candidates;
+}
 
-  // Matching, the blocks shared between threads.
-  clock = Clock::now();
-  MatchingContext context{remapped, intraop, intraopGridLabels, geometry, parameters};
-  context.h = h;
-  context.radius = std::max(1, int(std::ceil(parameters.searchRadiusMm / spacing)));
-  context.coarseStep = std::max(1, int(std::lround(parameters.coarseStepMm / spacing)));
+/// Every candidate matched, the blocks shared between two threads; the outcomes counted.
+void matchCandidates(const MatchingContext& context, const ScalarImage& grid, const std::vector<std::array<int, 3>>& candidates,
+                     const DisplacementPrediction& prediction, BlockMatchingResult& result)
+{
   std::vector<BlockMatch> matches(candidates.size());
   for (std::size_t b = 0; b < candidates.size(); ++b) { // the prediction need not be thread-safe
-    const auto& centre = candidates[b].second;
-    grid->TransformIndexToPhysicalPoint({{centre[0], centre[1], centre[2]}}, matches[b].centre);
+    grid.TransformIndexToPhysicalPoint({{candidates[b][0], candidates[b][1], candidates[b][2]}}, matches[b].centre);
     matches[b].predicted = prediction ? prediction(matches[b].centre) : std::array<double, 3>{0, 0, 0};
   }
   std::vector<Outcome> outcomes(candidates.size(), Outcome::LowSimilarity);
@@ -466,7 +469,7 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
   std::vector<std::thread> workers;
   for (unsigned t = 0; t < threads; ++t) {
     workers.emplace_back([&, t] {
-      for (std::size_t b = t; b < candidates.size(); b += threads) outcomes[b] = matchOne(context, candidates[b].second, matches[b]);
+      for (std::size_t b = t; b < candidates.size(); b += threads) outcomes[b] = matchOne(context, candidates[b], matches[b]);
     });
   }
   for (std::thread& w : workers) w.join();
@@ -478,6 +481,37 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
     case Outcome::AtSearchEdge: ++result.atSearchEdge; break;
     }
   }
+}
+
+} // namespace
+
+BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
+                                const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
+                                const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters)
+{
+  requireSensible(parameters);
+  BlockMatchingResult result;
+  auto clock = Clock::now();
+  const MatchingVolumes volumes =
+    prepareVolumes(preopImage, preopLabels, intraopImage, intraopLabels, rigidIntraopToPreop, parameters, result.remapCorrelationRatio);
+  if (!volumes.grid) return result;
+  result.remapSeconds = secondsSince(clock);
+
+  clock = Clock::now();
+  const GridGeometry geometry = geometryOf(*volumes.grid);
+  const double spacing = std::max({geometry.spacing[0], geometry.spacing[1], geometry.spacing[2]});
+  const int h = std::max(1, int(std::lround(parameters.blockHalfSizeMm / spacing)));
+  const int stride = std::max(1, int(std::lround(parameters.blockSpacingMm / spacing)));
+  const std::vector<std::array<int, 3>> candidates = selectCandidates(volumes, h, stride, parameters, result.candidates);
+  result.selected = candidates.size();
+  result.selectionSeconds = secondsSince(clock);
+
+  clock = Clock::now();
+  MatchingContext context{volumes.remapped, volumes.intraop, volumes.intraopLabels, geometry, parameters};
+  context.h = h;
+  context.radius = std::max(1, int(std::ceil(parameters.searchRadiusMm / spacing)));
+  context.coarseStep = std::max(1, int(std::lround(parameters.coarseStepMm / spacing)));
+  matchCandidates(context, *volumes.grid, candidates, prediction, result);
   result.matchingSeconds = secondsSince(clock);
   return result;
 }

@@ -614,11 +614,7 @@ std::vector<double> softConstraintMisfits(const FiniteElementJob& mesh, const st
   std::vector<double> misfits(constraints.size(), 0.0);
   for (std::size_t i = 0; i < constraints.size(); ++i) {
     const SoftConstraint& c = constraints[i];
-    double r[3] = {-c.target[0], -c.target[1], -c.target[2]};
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t node = std::size_t(mesh.tetrahedra[4 * std::size_t(c.tetrahedron) + k]);
-      for (int d = 0; d < 3; ++d) r[d] += c.weights[k] * displacements[3 * node + std::size_t(d)];
-    }
+    const std::array<double, 3> r = softConstraintResidual(mesh, c, displacements);
     const double W[3][3] = {{c.stiffness[0], c.stiffness[1], c.stiffness[2]},
                             {c.stiffness[1], c.stiffness[3], c.stiffness[4]},
                             {c.stiffness[2], c.stiffness[4], c.stiffness[5]}};
