@@ -10,30 +10,21 @@ it. Writes OUT/settings.csv, OUT/summary.md and OUT/tre_vs_time.png (TRE mean ag
 time, one panel per scenario, the Pareto front drawn).
 """
 import csv
-import json
+import io
 import os
 import sys
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-
-def load(path):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return None
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+from benchmark_common import (  # noqa: E402  (benchmark_common.py is in the folder above)
+    load_json, machine_section, output_folder, plt, save_atomically, write_atomically)
 
 
 def row_of(scenario, setting, folder):
-    report = load(os.path.join(folder, "report.json"))
+    report = load_json(os.path.join(folder, "report.json"))
     if setting == "surface-only":
-        evaluation = (load(os.path.join(folder, "evaluation.json")) or {}).get("transforms", {}).get("brainshift")
+        evaluation = (load_json(os.path.join(folder, "evaluation.json")) or {}).get("transforms", {}).get("brainshift")
     else:
-        evaluation = load(os.path.join(folder, "evaluation-landmarks.json"))
+        evaluation = load_json(os.path.join(folder, "evaluation-landmarks.json"))
     if not report or not evaluation:
         return None
     stages = report.get("stages", {})
@@ -82,10 +73,11 @@ def main(out):
                     rows.append(row)
     if not rows:
         sys.exit("report.py: no runs in " + runs)
-    with open(os.path.join(out, "settings.csv"), "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
-        writer.writeheader()
-        writer.writerows(rows)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0].keys()))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomically(os.path.join(out, "settings.csv"), text.getvalue())
     scenarios = sorted({r["scenario"] for r in rows})
     fmt = lambda v: "" if v is None else (f"{v:.2f}" if isinstance(v, float) else str(v))
     lines = ["# Block matching: settings against time", "",
@@ -112,8 +104,8 @@ def main(out):
         n = len(mine)
         lines.append(f"| {setting} | {sum(r['tre_mean_mm'] for r in mine) / n:.3f} | {sum(r['tre_p95_mm'] for r in mine) / n:.3f} | "
                      f"{sum(r['update_seconds'] for r in mine) / n:.1f} |")
-    with open(os.path.join(out, "summary.md"), "w") as f:
-        f.write("\n".join(lines) + "\n")
+    lines += [""] + machine_section(out)
+    write_atomically(os.path.join(out, "summary.md"), "\n".join(lines) + "\n")
     fig, axes = plt.subplots(1, len(scenarios), figsize=(4.5 * len(scenarios), 4), squeeze=False)
     for axis, scenario in zip(axes[0], scenarios):
         mine = [r for r in rows if r["scenario"] == scenario]
@@ -127,8 +119,8 @@ def main(out):
         axis.set_xlabel("update time (s)")
         axis.set_ylabel("TRE mean (mm)")
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "tre_vs_time.png"), dpi=120)
+    save_atomically(fig, os.path.join(out, "tre_vs_time.png"))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else "Testing/Benchmarks/results/blockmatching")
+    main(output_folder())
