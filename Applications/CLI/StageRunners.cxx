@@ -581,16 +581,8 @@ ScalarImage::Pointer uncertaintyOnScan(vtkUnstructuredGrid* mesh, const Displace
 {
   constexpr float OutsideMeshMm = 0.5f;
   if (!mesh->GetPointData()->GetArray("DisplacementUncertainty")) return nullptr;
-  const ScalarImage::Pointer modelFrame = rasteriseNodalScalar(mesh, "DisplacementUncertainty", 2.0, OutsideMeshMm, meshName);
-  ScalarImage::Pointer onScan = warpScalarVolume(*modelFrame, field);
-  float* values = onScan->GetBufferPointer();
-  const std::size_t count = onScan->GetLargestPossibleRegion().GetNumberOfPixels();
   std::vector<float> inBrain;
-  for (std::size_t i = 0; i < count; ++i) {
-    if (!(values[i] > 0)) values[i] = OutsideMeshMm; // beyond the raster: the rigid mapping
-    if (values[i] != OutsideMeshMm) inBrain.push_back(values[i]);
-  }
-  std::sort(inBrain.begin(), inBrain.end());
+  const ScalarImage::Pointer onScan = nodalScalarOnGrid(mesh, "DisplacementUncertainty", field, 2.0, OutsideMeshMm, &inBrain, meshName);
   auto share = [&inBrain](float limit) {
     return inBrain.empty() ? 0.0 : double(std::lower_bound(inBrain.begin(), inBrain.end(), limit) - inBrain.begin()) / double(inBrain.size());
   };

@@ -1,6 +1,7 @@
 #include "NodalFieldRasterisation.h"
 
 #include "BrainShiftErrors.h"
+#include "DeformationField.h"
 
 #include <vtkCellType.h>
 #include <vtkDataArray.h>
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 namespace brainshift {
 namespace {
@@ -80,6 +82,26 @@ ScalarImage::Pointer rasteriseNodalScalar(vtkUnstructuredGrid* mesh, const std::
         }
   }
   return image;
+}
+
+ScalarImage::Pointer nodalScalarOnGrid(vtkUnstructuredGrid* mesh, const std::string& arrayName, const DisplacementFieldImage& field,
+                                       double spacingMm, float outside, std::vector<float>* inside, const std::string& meshName)
+{
+  // NaN marks the voxels outside the mesh through the linear resampling; beyond the raster's grid
+  // the resampling gives 0, which `outside` also replaces (the values are positive or NaN there).
+  const ScalarImage::Pointer modelFrame =
+    rasteriseNodalScalar(mesh, arrayName, spacingMm, std::numeric_limits<float>::quiet_NaN(), meshName);
+  ScalarImage::Pointer onGrid = warpScalarVolume(*modelFrame, field);
+  float* values = onGrid->GetBufferPointer();
+  const std::size_t count = onGrid->GetLargestPossibleRegion().GetNumberOfPixels();
+  if (inside) inside->clear();
+  for (std::size_t i = 0; i < count; ++i) {
+    const bool known = std::isfinite(values[i]) && values[i] != 0.0f;
+    if (!known) values[i] = outside;
+    else if (inside) inside->push_back(values[i]);
+  }
+  if (inside) std::sort(inside->begin(), inside->end());
+  return onGrid;
 }
 
 } // namespace brainshift

@@ -5,6 +5,8 @@
 // (each over the voxels of its bounding box), so its cost follows the mesh, not the image.
 #include "ImageTypes.h"
 
+#include <vector>
+
 #include <vtkUnstructuredGrid.h>
 
 #include <string>
@@ -15,5 +17,13 @@ namespace brainshift {
 /// naming `meshName` when the mesh lacks the point array or holds other cells than tetrahedra.
 ScalarImage::Pointer rasteriseNodalScalar(vtkUnstructuredGrid* mesh, const std::string& arrayName, double spacingMm, float outside,
                                           const std::string& meshName = "the mesh");
+
+/// The nodal scalar on the intraoperative grid of `field` (x = y + d(y), preoperative frame): each
+/// voxel takes the value at x, interpolated in the undeformed mesh (rasterised at `spacingMm` and
+/// resampled linearly). Voxels whose x falls outside the mesh, or within a raster voxel of its
+/// boundary, get `outside`; `inside` (if given) receives the other voxels' values, sorted.
+ScalarImage::Pointer nodalScalarOnGrid(vtkUnstructuredGrid* mesh, const std::string& arrayName, const DisplacementFieldImage& field,
+                                       double spacingMm, float outside, std::vector<float>* inside = nullptr,
+                                       const std::string& meshName = "the mesh");
 
 } // namespace brainshift

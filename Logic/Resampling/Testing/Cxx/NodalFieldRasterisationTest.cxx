@@ -9,6 +9,7 @@
 #include <vtkDoubleArray.h>
 #include <vtkPointData.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 
@@ -44,6 +45,22 @@ int NodalFieldRasterisationTest(int, char*[])
     // A point outside both (the cube's corner (10, 10, 0)) keeps the outside value.
     const ScalarImage::IndexType corner = image->TransformPhysicalPointToIndex(testing::point(10, 10, 0));
     BS_CHECK(image->GetPixel(corner) == -1.0f);
+    // On a scan's grid through a field: here x = y + (1, 0, 0), so the voxel at y shows the value
+    // at y + (1, 0, 0); voxels whose x leaves the mesh (or its last raster voxel) get the outside value.
+    const ImageGeometry scan = testing::grid({{16, 16, 16}}, {1.0, 1.0, 1.0}, testing::point(-3, -3, -3));
+    const auto field = testing::imageOn<DisplacementFieldImage>(scan, [](const PhysicalPoint&) {
+      DisplacementVector d;
+      d[0] = 1.0;
+      d[1] = 0.0;
+      d[2] = 0.0;
+      return d;
+    });
+    std::vector<float> insideValues;
+    const ScalarImage::Pointer onScan = nodalScalarOnGrid(mesh, "Sigma", *field, 1.0, -1.0f, &insideValues, "two-tetrahedra.vtu");
+    const double deep[3] = {4.0, 3.0, 3.0}; // y = (3, 3, 3): x = (4, 3, 3), inside the first tetrahedron
+    BS_CHECK_NEAR(double(onScan->GetPixel(onScan->TransformPhysicalPointToIndex(testing::point(3, 3, 3)))), linear(deep), 1e-5);
+    BS_CHECK(onScan->GetPixel(onScan->TransformPhysicalPointToIndex(testing::point(-3, -3, -3))) == -1.0f);
+    BS_CHECK_MSG(insideValues.size() > 100 && std::is_sorted(insideValues.begin(), insideValues.end()), insideValues.size());
     BS_CHECK_THROWS(rasteriseNodalScalar(mesh, "Missing", 1.0, 0.0f, "two-tetrahedra.vtu"), InputError,
                     "two-tetrahedra.vtu: no point array \"Missing\"");
   });
