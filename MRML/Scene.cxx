@@ -206,6 +206,39 @@ void Scene::clear()
   while (!nodes_.empty()) remove(nodes_.back()->id());
 }
 
+void Scene::moveNodesFrom(Scene& source)
+{
+  if (&source == this) return;
+  std::vector<std::shared_ptr<Node>> moved;
+  moved.swap(source.nodes_);
+  const SliceViewLayers sourceLayers = source.sliceViewLayers_;
+  source.sliceViewLayers_ = SliceViewLayers{};
+  std::map<std::string, std::string> newIdOf;
+  std::vector<std::string> oldParentOf;
+  for (const auto& n : moved) {
+    source.notify(SceneEventType::NodeRemoved, n.get());
+    oldParentOf.push_back(n->parentTransformId_);
+    const std::string oldId = n->id_;
+    n->scene_ = nullptr;
+    n->parentTransformId_.clear();
+    addNode(n);
+    newIdOf[oldId] = n->id_;
+  }
+  for (std::size_t i = 0; i < moved.size(); ++i) {
+    if (oldParentOf[i].empty()) continue;
+    const auto parent = newIdOf.find(oldParentOf[i]);
+    if (parent != newIdOf.end()) moved[i]->setParentTransformId(parent->second);
+  }
+  if (!sourceLayers.empty()) {
+    SliceViewLayers layers = sourceLayers;
+    for (std::string* id : {&layers.backgroundVolumeId, &layers.foregroundVolumeId, &layers.labelVolumeId}) {
+      const auto mapped = newIdOf.find(*id);
+      *id = mapped == newIdOf.end() ? std::string() : mapped->second;
+    }
+    setSliceViewLayers(layers);
+  }
+}
+
 std::shared_ptr<Node> Scene::node(const std::string& id) const
 {
   for (const auto& n : nodes_) {

@@ -57,6 +57,11 @@ public:
   /// Removes the node (children placed under a removed transform move to its parent).
   void remove(const std::string& id);
   void clear();
+  /// Moves every node of `source` into this scene, in its order (each gets an id of this scene; the
+  /// transforms they live under and `source`'s slice view layers follow them), and takes those
+  /// layers when it has any. `source` is left empty. For a scene read aside (off the GUI thread)
+  /// and then handed to the scene the views follow.
+  void moveNodesFrom(Scene& source);
 
   std::shared_ptr<Node> node(const std::string& id) const;
   const std::vector<std::shared_ptr<Node>>& nodes() const { return nodes_; }

@@ -4,30 +4,8 @@
 // InputError (exit 2) and a failure of the method by MethodError (exit 1).
 #include <CLI/CLI.hpp>
 
-#include <filesystem>
-#include <optional>
-#include <string>
-#include <vector>
 
 namespace brainshift::cli {
-
-/// The flags `register` and its stages share.
-struct RunOptions {
-  std::filesystem::path preopImage, preopLabels, intraopImage, outputDir, config;
-  std::vector<std::string> overlays;
-  std::optional<int> ranks;
-  std::optional<double> meshResolutionMm;
-  std::optional<std::string> meshBackend;
-  std::optional<double> meshGrading;
-  std::vector<double> meshRegionOfInterest; ///< x, y, z (LPS mm), radius mm; empty: the configuration's
-  std::optional<std::string> solverOptions;
-  std::filesystem::path prototypes; ///< classification prototypes (recorded or picked); empty: automatic
-  std::optional<std::string> tumourResected; ///< "yes", "no" or "auto" (the configuration's otherwise)
-  /// An earlier scan's output folder of the same case (register --previous): its rigid transform
-  /// starts the registration, its prototypes classify, its mesh and preoperative surface fit are reused.
-  std::filesystem::path previous;
-  bool overwrite = false; ///< register into a folder holding another case's results
-};
 
 void addEvaluateCommand(CLI::App& app);
 void addDemoCommand(CLI::App& app);

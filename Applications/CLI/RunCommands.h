@@ -1,18 +1,9 @@
 #pragma once
-// What `register`, its stages and `demo` share: the flags, the configuration with the flags over
-// it, the inputs read once, and the pipeline of stages in order.
+// The flags `register`, `watch`, `demo` and the stage subcommands share, declared on CLI11; what
+// they fill (RunOptions) and what runs them (the update pipeline) are the logic's
+// (Logic/Update/UpdatePipeline.h).
 #include "Commands.h"
-#include "Configuration.h"
-#include "DistanceMaps.h"
-#include "FiniteElementSolver.h"
-#include "RigidRegistrationLogic.h"
-#include "TissueClassificationLogic.h"
-#include "RegistrationInputs.h"
-#include "RunReport.h"
-
-#include <functional>
-#include <memory>
-#include <optional>
+#include "UpdatePipeline.h"
 
 namespace brainshift::cli {
 
@@ -21,128 +12,5 @@ enum class InputFlag { PreopImage = 1, PreopLabels = 2, IntraopImage = 4, Overla
 /// Declares the flags of RunOptions on `command`; `required` inputs are marked required.
 void addRunOptions(CLI::App* command, RunOptions& options, unsigned requiredInputs, unsigned offeredInputs,
                    bool solverFlags, bool meshFlags, bool classificationFlags = false);
-
-/// The configuration file (or the defaults) with the command-line flags over it, validated.
-Configuration configurationFor(const RunOptions& options);
-
-/// What `brainshift watch` keeps between the scans of one case, in memory: the preoperative inputs
-/// (read and checked once, before surgery) and the finite element worker, served (its partition
-/// and assembled matrix kept; each scan's fixed nodes eliminated anew).
-struct SerialScanSession {
-  std::optional<RegistrationInputs> preoperative; ///< preoperative image, labels, overlays
-  std::shared_ptr<const PreoperativeTissueMaps> tissueMaps; ///< the classification's, of those labels
-  std::shared_ptr<const PreparedRigidMoving> rigidMoving;   ///< the rigid registration's, of that image
-  std::unique_ptr<FiniteElementSession> worker;
-  int scans = 0; ///< scans registered so far
-};
-
-/// One run of stages on one case: its options, configuration and report, and its inputs, each read
-/// and checked once, when a stage first asks for it.
-class RunContext {
-public:
-  RunContext(RunOptions options, Configuration configuration, RunReport& report);
-
-  const RunOptions& options() const { return options_; }
-  const Configuration& configuration() const { return configuration_; }
-  RunReport& report() { return report_; }
-  std::filesystem::path output(const std::string& fileName) const { return options_.outputDir / fileName; }
-
-  /// Reads and checks every input given on the command line at once (`register` does this first).
-  void loadAllInputs();
-  /// InputError naming the missing flag when the stage needs an input it was not given.
-  const ScalarImage& preopImage(const std::string& stage);
-  const ScalarImage& intraopImage(const std::string& stage);
-  /// The labels when given, else null.
-  const LabelImage* preopLabelsIfGiven();
-  const LabelImage& preopLabels(const std::string& stage);
-  /// The --overlay volumes, read and checked once.
-  const std::vector<LoadedOverlay>& overlays();
-  /// A file of the previous scan's output folder (--previous), when one was given and holds it.
-  std::optional<std::filesystem::path> previousFile(const std::string& fileName) const;
-  /// The previous scan's report (empty when none was given).
-  const nlohmann::json& previousReport() const { return previousReport_; }
-  /// Takes --previous for this case (`fingerprint`: caseFingerprint's): InputError naming the
-  /// folder when it is missing, holds no report, or is another case's.
-  void usePreviousScan(const nlohmann::json& fingerprint);
-  /// Runs within a watch session: the preoperative inputs come from (or go into) it, and the
-  /// simulate stage solves with its served worker.
-  void joinSession(SerialScanSession& session) { session_ = &session; }
-  SerialScanSession* session() const { return session_; }
-  /// The refine stage's spatial prior: the preoperative labels warped onto the intraoperative grid
-  /// by the last solve (classify then uses them with the identity instead of the preoperative labels
-  /// through the rigid transform, and surface reuses the preoperative boundary it found); null: none.
-  /// `moved` (on the same grid) marks where the solve moved the tissue: only there does the new
-  /// classification replace `anchor`, the classification through the rigid prior (elsewhere the two
-  /// priors agree, and an ambiguous boundary left to the prior alone would follow the last pass's
-  /// own error from pass to pass).
-  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr)
-  {
-    warpedPrior_ = std::move(labels);
-    warpedPriorPass_ = pass;
-    movedByPrior_ = std::move(moved);
-    anchorLabels_ = std::move(anchor);
-  }
-  const LabelImage* warpedPrior() const { return warpedPrior_.GetPointer(); }
-  int warpedPriorPass() const { return warpedPriorPass_; }
-  const MaskImage* movedByPrior() const { return movedByPrior_.GetPointer(); }
-  const LabelImage* anchorLabels() const { return anchorLabels_.GetPointer(); }
-
-private:
-  RunOptions options_;
-  Configuration configuration_;
-  RunReport& report_;
-  std::optional<RegistrationInputs> inputs_;
-  ScalarImage::Pointer preopImage_, intraopImage_;
-  LabelImage::Pointer preopLabels_;
-  std::optional<std::vector<LoadedOverlay>> overlays_;
-  nlohmann::json previousReport_;
-  SerialScanSession* session_ = nullptr;
-  LabelImage::Pointer warpedPrior_;
-  int warpedPriorPass_ = 0;
-  MaskImage::Pointer movedByPrior_;
-  LabelImage::Pointer anchorLabels_;
-};
-
-/// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
-/// and labels and of the intraoperative image, and fingerprints of what they hold (64-bit FNV-1a of
-/// the voxels and the geometry; the same data in another file or format is the same). A later scan
-/// of the same case has the same preoperative data.
-nlohmann::json caseFingerprint(RunContext& context);
-
-/// A stage alone: refuses an output folder whose report records another case's preoperative
-/// image or labels than those given (InputError, before the stage works) unless --overwrite (then
-/// the report starts afresh), and records the given inputs' fingerprints in "case_inputs".
-void claimCaseForStage(RunContext& context, const std::string& stage);
-
-/// `register`: reads and checks the inputs, refuses an output folder whose report records another
-/// case's inputs (InputError, before anything is written) unless --overwrite (then the report
-/// starts afresh), takes the previous scan (--previous), records the case's fingerprint, and runs
-/// every stage. The report is saved after each stage and on failure.
-void runRegistration(RunContext& context);
-
-/// A stage of the intraoperative update, as the command line runs it.
-struct PipelineStage {
-  std::string name;    ///< the subcommand
-  std::string summary; ///< one line for --help
-  /// Runs the stage on the case; empty while the stage is not built. A result that cannot be
-  /// trusted is a MethodError (exit 1).
-  std::function<void(RunContext&)> run;
-};
-
-/// The stages in the order `register` runs them.
-const std::vector<PipelineStage>& pipelineStages();
-
-/// Runs the stages in order, saving the report after each. Stops at the first stage that is not
-/// built with NotAvailableError; a failing stage stops the pipeline with its reason.
-void runPipeline(RunContext& context);
-
-/// The stage runners (StageRunners.cxx).
-void runRigidStage(RunContext& context);
-void runClassifyStage(RunContext& context);
-void runSimulateStage(RunContext& context);
-void runMeshStage(RunContext& context);
-void runSurfaceStage(RunContext& context);
-void runWarpStage(RunContext& context);
-void runRefineStage(RunContext& context); ///< RefineStage.cxx
 
 } // namespace brainshift::cli

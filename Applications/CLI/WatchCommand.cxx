@@ -16,7 +16,7 @@
 #include "OpenIGTLinkSender.h"
 #include "OpenIGTLinkServer.h"
 #include "UpdateFolder.h"
-#include "OutputFolder.h"
+#include "IntraoperativeUpdateLogic.h"
 #include "RunCommands.h"
 #include "RunReport.h"
 
@@ -124,54 +124,6 @@ std::string exportScanToDicom(const fs::path& scanFolder, const fs::path& target
   }
 }
 
-bool isImageFile(const fs::path& path)
-{
-  const std::string name = path.filename().string();
-  for (const char* extension : {".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"}) {
-    const std::string e = extension;
-    if (name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0) return true;
-  }
-  return false;
-}
-
-/// The next image of the watched folder not yet taken, once its size has stayed the same over one
-/// poll (the scanner may still be writing it); empty when none is ready.
-class FolderWatcher {
-public:
-  explicit FolderWatcher(fs::path folder)
-    : folder_(std::move(folder))
-  {
-    std::error_code ec;
-    if (!fs::is_directory(folder_, ec)) throw InputError(folder_.string() + ": --watch-dir is not a folder");
-  }
-
-  std::optional<fs::path> next()
-  {
-    std::error_code ec;
-    std::set<fs::path> candidates;
-    for (const auto& entry : fs::directory_iterator(folder_, ec)) {
-      if (entry.is_regular_file(ec) && isImageFile(entry.path()) && !taken_.count(entry.path())) candidates.insert(entry.path());
-    }
-    for (const fs::path& file : candidates) { // name order
-      const auto size = fs::file_size(file, ec);
-      if (ec) continue;
-      auto [at, fresh] = lastSize_.emplace(file, size);
-      if (fresh || at->second != size) {
-        at->second = size;
-        continue; // seen for the first time or still growing: next poll
-      }
-      taken_.insert(file);
-      return file;
-    }
-    return std::nullopt;
-  }
-
-private:
-  fs::path folder_;
-  std::set<fs::path> taken_;
-  std::map<fs::path, std::uintmax_t> lastSize_;
-};
-
 /// Where the session's scans come from: the --scans list first, then each new image of --watch-dir
 /// and each IMAGE intraop a client sends, whichever comes first.
 class ScanSource {
@@ -179,7 +131,7 @@ public:
   ScanSource(const WatchOptions& o, OpenIGTLinkServer* server)
     : scans_(o.scans), server_(server), pollSeconds_(o.pollSeconds)
   {
-    if (!o.watchFolder.empty()) watcher_ = std::make_unique<FolderWatcher>(o.watchFolder);
+    if (!o.watchFolder.empty()) watcher_ = std::make_unique<ScanFolderWatcher>(o.watchFolder);
   }
   /// Whether the session goes on after the list (until --max-scans or an interruption).
   bool waits() const { return watcher_ || server_; }
@@ -203,81 +155,10 @@ public:
 private:
   std::vector<fs::path> scans_;
   std::size_t listed_ = 0;
-  std::unique_ptr<FolderWatcher> watcher_;
+  std::unique_ptr<ScanFolderWatcher> watcher_;
   OpenIGTLinkServer* server_;
   double pollSeconds_;
 };
-
-/// Claims --output-dir for the session; an earlier session's scans are removed with --overwrite.
-void prepareSessionFolder(const RunOptions& run, const fs::path& summaryFile)
-{
-  claimOutputFolder(run.outputDir); // before the earlier session's check: one session per folder
-  std::error_code ec;
-  if (fs::exists(summaryFile, ec)) { // an earlier session's scans: kept unless told otherwise
-    if (!run.overwrite) {
-      throw InputError(run.outputDir.string() + ": holds an earlier watch session (watch.json); choose another --output-dir, "
-                       "or pass --overwrite to replace its scans");
-    }
-    for (const auto& entry : fs::directory_iterator(run.outputDir, ec)) {
-      const std::string name = entry.path().filename().string();
-      if (entry.is_directory(ec) && (name.rfind("scan-", 0) == 0 || name == "received")) fs::remove_all(entry.path(), ec);
-    }
-    fs::remove(summaryFile, ec);
-  }
-  fs::create_directories(run.outputDir, ec);
-  if (ec) throw InputError(run.outputDir.string() + ": cannot create the output folder (" + ec.message() + ")");
-}
-
-struct ScanResult {
-  nlohmann::json entry;
-  bool registered = false;
-};
-
-/// The trust assessment's verdict on a scan's non-rigid update ("trusted", "doubtful", "rejected":
-/// the rigid result stands), or "not assessed" when the update did not get that far.
-std::string trustOf(const fs::path& scanFolder)
-{
-  try {
-    const nlohmann::json report = nlohmann::json::parse(readTextFile(scanFolder / "report.json"));
-    if (report.contains("trust") && report["trust"].contains("nonrigid")) return report["trust"]["nonrigid"].get<std::string>();
-  } catch (const std::exception&) {
-  }
-  return "not assessed";
-}
-
-/// Registers one scan into run.outputDir as `register --previous` would.
-ScanResult registerScan(const RunOptions& run, const Configuration& configuration, SerialScanSession& session, unsigned number)
-{
-  ScanResult result;
-  result.entry = {{"scan", number}, {"intraop_image", fs::absolute(run.intraopImage).string()}, {"output_dir", run.outputDir.string()}};
-  const auto start = std::chrono::steady_clock::now();
-  try {
-    RunReport report(run.outputDir / "report.json");
-    report.clear(); // a scan folder of an earlier session is replaced
-    RunContext context(run, configuration, report);
-    context.joinSession(session);
-    runRegistration(context);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    report.set("scan_wall_seconds", seconds);
-    report.save();
-    result.entry["wall_seconds"] = seconds;
-    result.entry["outcome"] = "registered";
-    nlohmann::json stages = nlohmann::json::object();
-    for (const auto& [stage, values] : report.document()["stages"].items()) stages[stage] = values.value("wall_seconds", 0.0);
-    result.entry["stage_seconds"] = stages;
-    result.entry["trust"] = trustOf(run.outputDir);
-    result.registered = true;
-    std::printf("== scan %u registered in %.2f s; the non-rigid update is %s\n", number, seconds,
-                result.entry["trust"].get<std::string>().c_str());
-  } catch (const std::exception& e) { // one scan's failure does not end the watch
-    result.entry["wall_seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    result.entry["outcome"] = std::string("failed: ") + e.what();
-    // A rejected update has left the rigid result in every file: the surgeon must see which it is.
-    result.entry["trust"] = trustOf(run.outputDir);
-    std::fprintf(stderr, "brainshift watch: scan %u (%s): %s\n", number, run.intraopImage.string().c_str(), e.what());
-  }
-  return result;
-}
 
 void runWatch(const WatchOptions& o)
 {
@@ -287,61 +168,45 @@ void runWatch(const WatchOptions& o)
   }
   if (!(o.pollSeconds > 0 && o.pollSeconds <= 60)) throw InputError("--poll-seconds must be within 0 and 60");
   if (!o.igtlServer.empty()) parseServerAddress(o.igtlServer); // bad input before any work
-  const Configuration configuration = configurationFor(o.run);
-  const fs::path summaryFile = o.run.outputDir / "watch.json";
-  prepareSessionFolder(o.run, summaryFile);
+  std::error_code ec;
+  if (!o.watchFolder.empty() && !fs::is_directory(o.watchFolder, ec)) throw InputError(o.watchFolder.string() + ": --watch-dir is not a folder");
+  IntraoperativeUpdateLogic session(o.run); // the configuration checked before anything is written
+  session.prepare(); // the folder claimed, the preoperative data read and checked once, before the first scan
   std::unique_ptr<OpenIGTLinkServer> server;
   if (!o.igtlServer.empty()) server = startIgtlServer(o.igtlServer, o.run.outputDir / "received");
   ScanSource source(o, server.get());
+  const auto extra = [&] { return server ? nlohmann::json{{"igtl_server", igtlServerSummary(*server)}} : nlohmann::json::object(); };
 
-  SerialScanSession session;
-  nlohmann::json summary = {{"preop_image", fs::absolute(o.run.preopImage).string()},
-                            {"preop_labels", fs::absolute(o.run.preopLabels).string()},
-                            {"scans", nlohmann::json::array()}};
-  const auto saveSummary = [&] {
-    if (server) summary["igtl_server"] = igtlServerSummary(*server);
-    writeTextFileAtomically(summaryFile, summary.dump(2) + "\n");
-  };
-  fs::path previous;
   std::size_t failures = 0;
   const unsigned limit = o.maximumScans > 0 ? o.maximumScans : (source.waits() ? 0u : unsigned(o.scans.size()));
   for (unsigned number = 1; limit == 0 || number <= limit; ++number) {
     const auto next = source.next();
     if (!next) break;
-    char folderName[32];
-    std::snprintf(folderName, sizeof folderName, "scan-%02u", number);
-    RunOptions run = o.run;
-    run.intraopImage = next->first;
-    run.outputDir = o.run.outputDir / folderName;
-    run.previous = previous;
-    run.overwrite = true; // the session's own folders (an earlier session's were removed above)
-    std::error_code ec;
-    fs::create_directories(run.outputDir, ec);
-    std::printf("== scan %u: %s (%s) -> %s\n", number, next->first.string().c_str(), next->second.c_str(),
-                run.outputDir.string().c_str());
+    std::printf("== scan %u: %s (%s) -> %s/scan-%02u\n", number, next->first.string().c_str(), next->second.c_str(),
+                o.run.outputDir.string().c_str(), number);
     std::fflush(stdout);
-    ScanResult result = registerScan(run, configuration, session, number);
-    result.entry["source"] = next->second;
-    if (result.registered) {
-      previous = run.outputDir;
-      ++session.scans;
-      if (server) result.entry["igtl"] = pushUpdate(*server, run.outputDir);
-      if (!o.exportDicom.empty()) result.entry["dicom"] = exportScanToDicom(run.outputDir, o.exportDicom / folderName);
+    const ScanUpdate scan = session.update(next->first, next->second);
+    ScanUpdate& kept = session.lastScan();
+    if (scan.registered) {
+      std::printf("== scan %u registered in %.2f s; the non-rigid update is %s\n", number, scan.wallSeconds, scan.trust.c_str());
+      if (server) kept.entry["igtl"] = pushUpdate(*server, scan.outputDir);
+      if (!o.exportDicom.empty()) kept.entry["dicom"] = exportScanToDicom(scan.outputDir, o.exportDicom / scan.outputDir.filename());
     } else {
       ++failures;
-      if (server) pushFailure(*server, number, result.entry["outcome"].get<std::string>());
+      const std::string reason = scan.outcome.rfind("failed: ", 0) == 0 ? scan.outcome.substr(8) : scan.outcome;
+      std::fprintf(stderr, "brainshift watch: scan %u (%s): %s\n", number, next->first.string().c_str(), reason.c_str());
+      if (server) pushFailure(*server, number, scan.outcome);
     }
     std::fflush(stdout);
-    summary["scans"].push_back(result.entry);
-    saveSummary();
+    session.saveSummary(extra());
   }
   if (server) {
     server->close(); // the last update pushed, the connections closed: every client's fate is known
-    saveSummary();
+    session.saveSummary(extra());
   }
   if (failures > 0) {
-    throw MethodError(std::to_string(failures) + " of " + std::to_string(summary["scans"].size()) + " scans failed (see " +
-                      summaryFile.string() + ")");
+    throw MethodError(std::to_string(failures) + " of " + std::to_string(session.scans().size()) + " scans failed (see " +
+                      session.summaryFile().string() + ")");
   }
 }
 

@@ -73,7 +73,7 @@ RegistrationInputs loadRegistrationInputs(const RegistrationInputPaths& paths)
   if (!present.count(2)) {
     warn(&inputs.warnings, paths.preopLabels.string() + ": no brain parenchyma (label 2) in the label map");
   }
-  inputs.intraopImage = readIntensityImage(paths.intraopImage, &inputs.warnings);
+  if (!paths.intraopImage.empty()) inputs.intraopImage = readIntensityImage(paths.intraopImage, &inputs.warnings);
   std::set<std::string> names;
   for (const OverlayInput& overlay : paths.overlays) {
     if (!names.insert(overlay.name).second) {

@@ -1,7 +1,7 @@
 #pragma once
 // The simulate stage's image-driven second solve (ImageMatchingSolve.cxx).
 #include "ImageMatchConstraints.h"
-#include "RunCommands.h"
+#include "UpdatePipeline.h"
 
 #include <nlohmann/json.hpp>
 #include <vtkUnstructuredGrid.h>
@@ -10,7 +10,7 @@
 #include <optional>
 #include <string>
 
-namespace brainshift::cli {
+namespace brainshift {
 
 /// Why block matching cannot run on this context (inputs not given, earlier stages' files absent),
 /// or nullopt when it can.
@@ -25,4 +25,4 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
                                         const FiniteElementResult& surfaceOnly, const ConstrainedSolve& solve, nlohmann::json& entry,
                                         DisplacementEvidence& evidence);
 
-} // namespace brainshift::cli
+} // namespace brainshift

@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <vector>
 
-namespace brainshift::cli {
+namespace brainshift {
 
 /// Creates `folder` if needed and claims it for this process: InputError (exit 2) naming the folder
 /// when it cannot be created, is not writable, or another brainshift run holds it (an advisory
@@ -22,4 +22,4 @@ void refuseOutputOverInputs(const std::filesystem::path& output, const std::vect
 /// (warped_*.nii.gz, mesh.vtu, report.json, ...): the run would replace its own input.
 void refuseInputsAmongOutputs(const std::filesystem::path& outputFolder, const std::vector<std::filesystem::path>& inputs);
 
-} // namespace brainshift::cli
+} // namespace brainshift

@@ -19,7 +19,7 @@
 #include <cmath>
 #include <cstdio>
 
-namespace brainshift::cli {
+namespace brainshift {
 namespace fs = std::filesystem;
 
 namespace {
@@ -107,7 +107,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
            {"selection_seconds", matching.selectionSeconds},
            {"matching_seconds", matching.matchingSeconds},
            {"stiffness_n_per_mm", configuration.blockMatching.stiffnessNPerMm}};
-  std::printf("  simulate: %zu of %zu blocks matched (%zu low similarity, %zu outside the brain, %zu at the search edge) in %.2f s\n",
+  context.say("simulate: %zu of %zu blocks matched (%zu low similarity, %zu outside the brain, %zu at the search edge) in %.2f s\n",
               matching.matches.size(), matching.selected, matching.lowSimilarity, matching.outsideBrain, matching.atSearchEdge,
               matching.remapSeconds + matching.selectionSeconds + matching.matchingSeconds);
   if (solved.used) {
@@ -124,7 +124,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
     entry["solve_seconds"] = result.setupSeconds + result.solveSeconds;
     writeMatches(matching.matches, solved.constraints, result, context.output("block_matches.vtp"));
     evidence = solved.evidence;
-    std::printf("  simulate: %zu of %zu matches kept after %zu solves; misfit %.2f mm (surface alone) -> %.2f mm (kept)\n", kept,
+    context.say("simulate: %zu of %zu matches kept after %zu solves; misfit %.2f mm (surface alone) -> %.2f mm (kept)\n", kept,
                 solved.constraints.constraints.size(), result.keptPerRound.size(), solved.rmsMisfitSurfaceOnlyMm,
                 result.rmsMisfitPerRoundMm.empty() ? 0.0 : result.rmsMisfitPerRoundMm.back());
   }
@@ -132,4 +132,4 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
   return solved.result;
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift

@@ -7,7 +7,7 @@
 #include "BrainShiftErrors.h"
 #include "DeformationField.h"
 #include "ModelIO.h"
-#include "RunCommands.h"
+#include "UpdatePipeline.h"
 #include "TransformIO.h"
 #include "VolumeIO.h"
 #include "WarpedPriorRefinement.h"
@@ -21,7 +21,7 @@
 #include <cstdio>
 #include <map>
 
-namespace brainshift::cli {
+namespace brainshift {
 namespace fs = std::filesystem;
 
 namespace {
@@ -155,7 +155,7 @@ void runRefineStage(RunContext& context)
                         {"mean_change_mm", change.meanMm},
                         {"max_change_mm", change.maxMm},
                         {"compared_nodes", change.nodes}});
-      std::printf("  refine pass %u: the imposed surface moved %.2f mm mean (%.2f max), %.2f s\n", pass, change.meanMm,
+      context.say("refine pass %u: the imposed surface moved %.2f mm mean (%.2f max), %.2f s\n", pass, change.meanMm,
                   change.maxMm, passClock.seconds());
       context.report().save();
     }
@@ -178,4 +178,4 @@ void runRefineStage(RunContext& context)
   }
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift

@@ -13,7 +13,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
-namespace brainshift::cli {
+namespace brainshift {
 namespace fs = std::filesystem;
 
 namespace {
@@ -112,4 +112,4 @@ void refuseInputsAmongOutputs(const fs::path& outputFolder, const std::vector<fs
   }
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift

@@ -22,7 +22,7 @@
 #include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
-#include "RunCommands.h"
+#include "UpdatePipeline.h"
 #include "TissueClassificationLogic.h"
 #include "TransformIO.h"
 #include "VolumeIO.h"
@@ -36,13 +36,14 @@
 #include <vtkDoubleArray.h>
 #include <vtkPointData.h>
 
-namespace brainshift::cli {
+namespace brainshift {
 namespace fs = std::filesystem;
 
 void runRigidStage(RunContext& context)
 {
   Stopwatch clock;
   RigidRegistrationParameters parameters;
+  parameters.cancel = context.cancelFlag();
   // The pyramid's first levels and a share of the samples (the configuration's speed knobs).
   const Configuration& configuration = context.configuration();
   const std::size_t levels = std::min<std::size_t>(configuration.rigidLevels, parameters.levelSpacingMm.size());
@@ -91,13 +92,13 @@ void runRigidStage(RunContext& context)
                       "; rigid_intraop_to_preop.tfm not written");
   }
   writeTransform(result.intraopToPreop, context.output("rigid_intraop_to_preop.tfm"));
-  std::printf("  rigid: rotation %.2f degrees, translation %.2f mm, NMI %.3f, overlap %.2f, %.2f s\n",
+  context.say("rigid: rotation %.2f degrees, translation %.2f mm, NMI %.3f, overlap %.2f, %.2f s\n",
               result.rotationDegrees, result.translationMm, result.normalizedMutualInformation, result.overlap, seconds);
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
 
-namespace brainshift::cli {
+namespace brainshift {
 
 namespace {
 nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
@@ -225,6 +226,7 @@ void runClassifyStage(RunContext& context)
   if (prototypesFile) prototypes = readPrototypes(*prototypesFile);
   const Configuration& configuration = context.configuration();
   TissueClassificationParameters parameters = classificationParametersFrom(configuration);
+  parameters.cancel = context.cancelFlag();
   if (!context.options().preopImage.empty()) {
     parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
   }
@@ -262,13 +264,13 @@ void runClassifyStage(RunContext& context)
                                          {"knn_queries", result.knnQueries},
                                          {"cleanup_seconds", result.cleanupSeconds}});
   context.report().addWarnings(result.warnings);
-  std::printf("  classify: %zu voxels, %zu prototypes, k-NN %.2f s, %.2f s%s\n", result.voxels, total, result.knnSeconds,
+  context.say("classify: %zu voxels, %zu prototypes, k-NN %.2f s, %.2f s%s\n", result.voxels, total, result.knnSeconds,
               seconds, result.tumourResected ? ", tumour resected" : "");
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
 
-namespace brainshift::cli {
+namespace brainshift {
 
 namespace {
 /// A watch session's solve: its served worker when it was prepared for this mesh, materials and
@@ -336,9 +338,9 @@ void runSimulateStage(RunContext& context)
   FiniteElementRunOptions options;
   options.ranks = configuration.ranks;
   options.worker = workerBesideExecutable();
-  options.progress = [](const std::string& stage, double) {
-    if (stage != "done") std::printf("  simulate: %s\n", stage.c_str());
-    std::fflush(stdout);
+  options.cancel = context.cancelFlag();
+  options.progress = [&context](const std::string& stage, double) {
+    if (stage != "done") context.say("simulate: %s\n", stage.c_str());
   };
   bool served = false, prepared = false;
   FiniteElementResult result;
@@ -349,6 +351,17 @@ void runSimulateStage(RunContext& context)
   SerialScanSession stageWorker;
   SerialScanSession* session = context.session();
   served = session != nullptr;
+  if (served) { // the served worker outlives this scan: its progress and cancellation go through the session
+    session->solveProgress = [&context](const std::string& stage) { context.say("simulate: %s\n", stage.c_str()); };
+    options.progress = [session](const std::string& stage, double) {
+      if (stage != "done" && session->solveProgress) session->solveProgress(stage);
+    };
+    options.cancel = &session->cancelRequested;
+  }
+  struct ProgressRelease { // the scan's context is gone after this stage
+    SerialScanSession* session;
+    ~ProgressRelease() { if (session) session->solveProgress = nullptr; }
+  } release{served ? session : nullptr};
   if (!session && !matchingUnavailable) session = &stageWorker;
   if (session) {
     result = solveInSession(*session, job, options, prepared);
@@ -387,20 +400,21 @@ void runSimulateStage(RunContext& context)
                                          {"tetrahedra_per_rank", result.tetrahedraPerRank},
                                          {"imposed_nodes", job.fixedNodes.size()},
                                          {"block_matching", blockMatching}});
-  std::printf("  simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
+  context.say("simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
               static_cast<long long>(result.equations), result.ranks, result.iterations, result.relativeResidual,
               result.assemblySeconds, result.setupSeconds, result.solveSeconds);
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
 
-namespace brainshift::cli {
+namespace brainshift {
 
 void runMeshStage(RunContext& context)
 {
   Stopwatch clock;
   const Configuration& configuration = context.configuration();
   MeshingParameters parameters;
+  parameters.cancel = context.cancelFlag();
   parameters.resolutionMm = configuration.meshResolutionMm;
   parameters.labels = configuration.meshLabels;
   parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
@@ -440,7 +454,7 @@ void runMeshStage(RunContext& context)
     entry["wall_seconds"] = clock.seconds();
     entry["reused_from"] = previousMesh->string();
     context.report().setStage("mesh", entry);
-    std::printf("  mesh: %lld nodes, reused from the previous scan, %.2f s\n", entry.value("nodes", 0LL), clock.seconds());
+    context.say("mesh: %lld nodes, reused from the previous scan, %.2f s\n", entry.value("nodes", 0LL), clock.seconds());
     return;
   }
   const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
@@ -468,13 +482,13 @@ void runMeshStage(RunContext& context)
                                      {"volume_ml", volumes},
                                      {"voxel_volume_ml", voxels}});
   context.report().addWarnings(result.warnings);
-  std::printf("  mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
+  context.say("mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
               q.minimumDihedralDegrees, q.maximumDihedralDegrees, clock.seconds());
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
 
-namespace brainshift::cli {
+namespace brainshift {
 
 void runSurfaceStage(RunContext& context)
 {
@@ -496,6 +510,7 @@ void runSurfaceStage(RunContext& context)
   const LabelImage::Pointer labels = readLabelVolume(labelsFile);
   const Configuration& configuration = context.configuration();
   ActiveSurfaceParameters parameters;
+  parameters.cancel = context.cancelFlag();
   parameters.membraneWeight = configuration.surfaceMembraneWeight;
   parameters.bendingWeight = configuration.surfaceBendingWeight;
   parameters.imageWeight = configuration.surfaceImageWeight;
@@ -555,14 +570,14 @@ void runSurfaceStage(RunContext& context)
                                         {"target_seconds", result.targetSeconds},
                                         {"iteration_seconds", result.iterationSeconds}});
   context.report().addWarnings(result.warnings);
-  std::printf("  surface: %zu nodes (%zu imposed), %u iterations, residual %.2f mm mean (from %.2f), displacement up to %.1f mm, %.2f s\n",
+  context.say("surface: %zu nodes (%zu imposed), %u iterations, residual %.2f mm mean (from %.2f), displacement up to %.1f mm, %.2f s\n",
               result.surfaceNodes, result.imposedNodes, result.iterations, result.meanResidualMm, result.initialMeanResidualMm,
               result.maxDisplacementMm, clock.seconds());
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
 
-namespace brainshift::cli {
+namespace brainshift {
 
 namespace {
 /// The update as a 3D Slicer scene beside its files: the intraoperative scan in the world, the
@@ -821,7 +836,7 @@ void keepRejectedUpdate(RunContext& context, const DisplacementFieldImage::Point
 void reportTrust(RunContext& context, const NonrigidUpdateTrustAssessment& trust)
 {
   const bool rejected = trust.trust == UpdateTrust::Rejected;
-  std::printf("  trust: non-rigid update %s (correlation ratio near the brain boundary %.3f, rigid alone %.3f; where it moves "
+  context.say("trust: non-rigid update %s (correlation ratio near the brain boundary %.3f, rigid alone %.3f; where it moves "
               "%.3f, rigid alone %.3f)%s\n",
               trustName(trust.trust).c_str(), trust.band.nonrigid, trust.band.rigid, trust.moved.nonrigid, trust.moved.rigid,
               rejected ? ": the files hold the rigid registration alone" : "");
@@ -916,10 +931,10 @@ void runWarpStage(RunContext& context)
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
                                   " voxels where the deformation folds (Jacobian determinant <= 0)"});
   }
-  std::printf("  warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
+  context.say("warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
               deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, trustSeconds,
               writeSeconds);
   reportTrust(context, trust);
 }
 
-} // namespace brainshift::cli
+} // namespace brainshift
