@@ -72,20 +72,38 @@ void IntraoperativeUpdateLogic::prepareOutputFolder()
     }
     for (const auto& entry : fs::directory_iterator(folder, ec)) {
       const std::string name = entry.path().filename().string();
-      if (entry.is_directory(ec) && (name.rfind("scan-", 0) == 0 || name == "received")) fs::remove_all(entry.path(), ec);
+      if (entry.is_directory(ec) && (name.rfind("scan-", 0) == 0 || name == "received" || name == "preoperative")) fs::remove_all(entry.path(), ec);
     }
     fs::remove(summaryFile(), ec);
   }
 }
 
-void IntraoperativeUpdateLogic::prepare()
+void IntraoperativeUpdateLogic::prepare(const UpdateProgressCallback& progress)
 {
   if (prepared_) return;
   prepareOutputFolder();
-  RunReport scratch(caseOptions_.outputDir / "preoperative-check.json"); // never saved: the warnings go with each scan
-  RunContext context(caseOptions_, configuration_, scratch);
+  RunOptions preparation = caseOptions_;
+  preparation.outputDir = preparedFolder();
+  std::error_code ec;
+  fs::create_directories(preparation.outputDir, ec);
+  if (ec) throw InputError(preparation.outputDir.string() + ": cannot create the folder (" + ec.message() + ")");
+  RunReport report(preparation.outputDir / "report.json");
+  report.clear();
+  RunContext context(preparation, configuration_, report);
   context.joinSession(session_);
+  if (progress) context.setProgressCallback(progress);
+  session_.cancelRequested = false;
+  context.setCancelFlag(&session_.cancelRequested);
   context.loadPreoperativeInputs();
+  report.set("case_inputs", preoperativeFingerprint(context));
+  try {
+    runPreparation(context); // the mesh, the preoperative boundary, the served worker
+  } catch (const std::exception&) {
+    session_.worker.reset();
+    report.save();
+    throw;
+  }
+  report.save();
   prepared_ = true;
 }
 
@@ -129,7 +147,8 @@ void IntraoperativeUpdateLogic::registerScan(ScanUpdate& scan, const UpdateProgr
   RunOptions run = caseOptions_;
   run.intraopImage = scan.intraopImage;
   run.outputDir = scan.outputDir;
-  run.previous = previous_.value_or(fs::path());
+  run.previous = previous_.value_or(preparedFolder()); // the first scan starts from what was prepared before surgery
+  run.previousIsPreparation = !previous_;
   run.overwrite = true; // the session's own folders (an earlier session's were removed by prepare)
   const auto start = std::chrono::steady_clock::now();
   RunReport report(run.outputDir / "report.json");

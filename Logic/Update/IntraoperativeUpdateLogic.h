@@ -71,9 +71,12 @@ public:
   IntraoperativeUpdateLogic& operator=(const IntraoperativeUpdateLogic&) = delete;
 
   /// Before surgery: claims the output folder (an earlier session there is refused with InputError
-  /// unless `overwrite`, then its scans are removed) and reads and checks the preoperative data
-  /// once. update() prepares when it was not done.
-  void prepare();
+  /// unless `overwrite`, then its scans are removed), reads and checks the preoperative data once,
+  /// and prepares in OUT/preoperative/ what every scan reuses (runPreparation: the mesh, the
+  /// preoperative brain boundary, the served finite element worker), reporting its steps to
+  /// `progress`. InputError for bad preoperative data, MethodError when the mesh or the worker
+  /// fails. update() prepares when it was not done.
+  void prepare(const UpdateProgressCallback& progress = {});
   bool prepared() const { return prepared_; }
 
   /// Registers one scan into OUT/scan-NN/, reporting each stage and each stage's lines to
@@ -95,6 +98,8 @@ public:
   /// Rewrites watch.json atomically.
   void saveSummary(const nlohmann::json& extra = nlohmann::json::object()) const;
   std::filesystem::path summaryFile() const { return caseOptions_.outputDir / "watch.json"; }
+  /// What prepare() made before surgery (OUT/preoperative/).
+  std::filesystem::path preparedFolder() const { return caseOptions_.outputDir / "preoperative"; }
   const RunOptions& caseOptions() const { return caseOptions_; }
   const Configuration& configuration() const { return configuration_; }
   /// The last scan whose pipeline ran to its end: later scans start from it.

@@ -10,6 +10,7 @@
 #include "VolumeNodes.h"
 
 #include <itkCompositeTransform.h>
+#include <itkEuler3DTransform.h>
 #include <itkIdentityTransform.h>
 #include <itkImageRegionConstIteratorWithIndex.h>
 
@@ -308,6 +309,39 @@ FiniteElementResult solveInSession(SerialScanSession& session, FiniteElementJob 
 } // namespace
 
 namespace {
+/// The finite element worker's options for a stage of this context: its progress as the stage's
+/// lines, its cancellation the context's. A session's served worker outlives one scan's context:
+/// its progress and cancellation then go through the session (for as long as this object lives).
+struct WorkerOptions {
+  FiniteElementRunOptions options;
+  SerialScanSession* session = nullptr;
+
+  WorkerOptions(RunContext& context, const std::string& stage)
+    : session(context.session())
+  {
+    options.ranks = context.configuration().ranks;
+    options.worker = workerBesideExecutable();
+    options.cancel = context.cancelFlag();
+    options.progress = [&context, stage](const std::string& step, double) {
+      if (step != "done") context.say("%s: %s\n", stage.c_str(), step.c_str());
+    };
+    if (!session) return;
+    session->solveProgress = [&context, stage](const std::string& step) { context.say("%s: %s\n", stage.c_str(), step.c_str()); };
+    options.progress = [served = session](const std::string& step, double) {
+      if (step != "done" && served->solveProgress) served->solveProgress(step);
+    };
+    options.cancel = &session->cancelRequested;
+  }
+  ~WorkerOptions()
+  {
+    if (session) session->solveProgress = nullptr;
+  }
+  WorkerOptions(const WorkerOptions&) = delete;
+  WorkerOptions& operator=(const WorkerOptions&) = delete;
+};
+} // namespace
+
+namespace {
 /// The point array "DisplacementUncertainty" (mm) of the solved mesh: the confidence of the
 /// displacement from the evidence behind it (DisplacementUncertainty.h): the imposed surface nodes
 /// and, when block matching ran, the kept matches and every match's misfit.
@@ -335,13 +369,6 @@ void runSimulateStage(RunContext& context)
   if (!surface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   const Configuration& configuration = context.configuration();
   const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, configuration, meshFile.string(), surfaceFile.string());
-  FiniteElementRunOptions options;
-  options.ranks = configuration.ranks;
-  options.worker = workerBesideExecutable();
-  options.cancel = context.cancelFlag();
-  options.progress = [&context](const std::string& stage, double) {
-    if (stage != "done") context.say("simulate: %s\n", stage.c_str());
-  };
   bool served = false, prepared = false;
   FiniteElementResult result;
   // Block matching solves again with the matches: a one-shot stage then keeps one worker for both
@@ -351,17 +378,8 @@ void runSimulateStage(RunContext& context)
   SerialScanSession stageWorker;
   SerialScanSession* session = context.session();
   served = session != nullptr;
-  if (served) { // the served worker outlives this scan: its progress and cancellation go through the session
-    session->solveProgress = [&context](const std::string& stage) { context.say("simulate: %s\n", stage.c_str()); };
-    options.progress = [session](const std::string& stage, double) {
-      if (stage != "done" && session->solveProgress) session->solveProgress(stage);
-    };
-    options.cancel = &session->cancelRequested;
-  }
-  struct ProgressRelease { // the scan's context is gone after this stage
-    SerialScanSession* session;
-    ~ProgressRelease() { if (session) session->solveProgress = nullptr; }
-  } release{served ? session : nullptr};
+  const WorkerOptions worker(context, "simulate");
+  const FiniteElementRunOptions& options = worker.options;
   if (!session && !matchingUnavailable) session = &stageWorker;
   if (session) {
     result = solveInSession(*session, job, options, prepared);
@@ -403,6 +421,75 @@ void runSimulateStage(RunContext& context)
   context.say("simulate: %lld equations on %d rank(s), %d iterations, residual %.1e; assembly %.2f s, setup %.2f s, solve %.2f s\n",
               static_cast<long long>(result.equations), result.ranks, result.iterations, result.relativeResidual,
               result.assemblySeconds, result.setupSeconds, result.solveSeconds);
+}
+
+namespace {
+ActiveSurfaceParameters activeSurfaceParametersFrom(RunContext& context); // with the surface stage
+
+/// The preoperative brain surface as the active surface finds it on the preoperative data alone
+/// (the preoperative image and labels as their own scan, through the identity). What a scan
+/// reuses of it is each node's preoperative boundary (PreopBoundary), found from the preoperative
+/// labels alone and the most costly part of the surface stage; its displacements only give the
+/// served worker a problem of the right shape to prepare on.
+void preparePreoperativeSurface(RunContext& context)
+{
+  Stopwatch clock;
+  const fs::path meshFile = context.output("mesh.vtu");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  const LabelImage& labels = context.preopLabels("prepare");
+  const auto identity = itk::Euler3DTransform<double>::New();
+  ActiveSurfaceInputNames names;
+  names.mesh = meshFile.string();
+  names.labels = names.preopLabels = context.options().preopLabels.string();
+  names.rigid = "the identity";
+  const ActiveSurfaceResult result =
+    deformBrainSurface(mesh, &labels, labels, &context.preopImage("prepare"), *identity, activeSurfaceParametersFrom(context), names, nullptr);
+  writeModel(result.surface, context.output("brain_surface.vtp"));
+  context.report().setStage("preoperative_surface", {{"wall_seconds", clock.seconds()},
+                                                     {"surface_nodes", result.surfaceNodes},
+                                                     {"imposed_nodes", result.imposedNodes},
+                                                     {"preop_boundary_seconds", result.preopBoundarySeconds}});
+  context.say("prepare: the preoperative brain boundary at %zu surface nodes, %.2f s\n", result.surfaceNodes, clock.seconds());
+}
+
+/// The session's served worker, partitioned and assembled on the prepared mesh before the first
+/// scan (that scan then eliminates its own fixed nodes and sets its preconditioner up).
+void prepareServedWorker(RunContext& context)
+{
+  Stopwatch clock;
+  if (!context.session()) throw std::logic_error("prepareServedWorker: not in a session");
+  const fs::path meshFile = context.output("mesh.vtu"), surfaceFile = context.output("brain_surface.vtp");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  if (!mesh || !surface) throw InputError(context.output("").string() + ": the prepared mesh or surface cannot be read");
+  const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, context.configuration(), meshFile.string(), surfaceFile.string());
+  const WorkerOptions worker(context, "prepare");
+  bool prepared = false;
+  const FiniteElementResult result = solveInSession(*context.session(), job, worker.options, prepared);
+  context.report().setStage("worker", {{"wall_seconds", clock.seconds()},
+                                       {"prepared", prepared},
+                                       {"equations", result.equations},
+                                       {"ranks", result.ranks},
+                                       {"partitioner", result.partitioner}});
+  context.say("prepare: the finite element worker served, %lld equations on %d rank(s), %.2f s\n",
+              static_cast<long long>(result.equations), result.ranks, clock.seconds());
+}
+} // namespace
+
+void runPreparation(RunContext& context)
+{
+  const std::size_t steps = 3;
+  context.stageStarts("mesh", 0, steps);
+  runMeshStage(context);
+  throwIfCancelled(context.cancelFlag(), "the preparation");
+  context.stageStarts("surface", 1, steps);
+  preparePreoperativeSurface(context);
+  throwIfCancelled(context.cancelFlag(), "the preparation");
+  if (context.session()) {
+    context.stageStarts("simulate", 2, steps);
+    prepareServedWorker(context);
+  }
 }
 
 } // namespace brainshift
@@ -490,6 +577,23 @@ void runMeshStage(RunContext& context)
 
 namespace brainshift {
 
+namespace {
+ActiveSurfaceParameters activeSurfaceParametersFrom(RunContext& context)
+{
+  const Configuration& configuration = context.configuration();
+  ActiveSurfaceParameters parameters;
+  parameters.cancel = context.cancelFlag();
+  parameters.membraneWeight = configuration.surfaceMembraneWeight;
+  parameters.bendingWeight = configuration.surfaceBendingWeight;
+  parameters.imageWeight = configuration.surfaceImageWeight;
+  parameters.maximumIterations = configuration.surfaceMaximumIterations;
+  parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
+  parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
+  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
+  return parameters;
+}
+} // namespace
+
 void runSurfaceStage(RunContext& context)
 {
   Stopwatch clock;
@@ -508,16 +612,7 @@ void runSurfaceStage(RunContext& context)
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   const LabelImage::Pointer labels = readLabelVolume(labelsFile);
-  const Configuration& configuration = context.configuration();
-  ActiveSurfaceParameters parameters;
-  parameters.cancel = context.cancelFlag();
-  parameters.membraneWeight = configuration.surfaceMembraneWeight;
-  parameters.bendingWeight = configuration.surfaceBendingWeight;
-  parameters.imageWeight = configuration.surfaceImageWeight;
-  parameters.maximumIterations = configuration.surfaceMaximumIterations;
-  parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
-  parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
-  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
+  const ActiveSurfaceParameters parameters = activeSurfaceParametersFrom(context);
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
   names.labels = labelsFile.string();

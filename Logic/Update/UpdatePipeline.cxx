@@ -90,13 +90,18 @@ const std::vector<LoadedOverlay>& RunContext::overlays()
 
 void RunContext::loadPreoperativeInputs()
 {
-  if (session_ && session_->preoperative) return;
-  RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, {}, {}};
-  for (const std::string& overlay : options_.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
-  RegistrationInputs inputs = loadRegistrationInputs(paths);
-  requireKnownLabels(*inputs.preopLabels, options_.preopLabels, configuration_);
-  report_.addWarnings(inputs.warnings);
-  if (session_) session_->preoperative = std::move(inputs);
+  if (session_ && session_->preoperative) {
+    inputs_ = *session_->preoperative;
+  } else {
+    RegistrationInputPaths paths{options_.preopImage, options_.preopLabels, {}, {}};
+    for (const std::string& overlay : options_.overlays) paths.overlays.push_back(parseOverlayArgument(overlay));
+    inputs_ = loadRegistrationInputs(paths);
+    requireKnownLabels(*inputs_->preopLabels, options_.preopLabels, configuration_);
+    report_.addWarnings(inputs_->warnings);
+    if (session_) session_->preoperative = *inputs_;
+  }
+  preopImage_ = inputs_->preopImage;
+  preopLabels_ = inputs_->preopLabels;
 }
 
 void RunContext::loadAllInputs()
@@ -211,15 +216,25 @@ void refuseAnotherCase(RunContext& context, const nlohmann::json& given)
 }
 } // namespace
 
-nlohmann::json caseFingerprint(RunContext& context)
+namespace {
+nlohmann::json fingerprintEntry(const fs::path& path, const std::string& fingerprint)
+{
+  return nlohmann::json{{"path", fs::absolute(path).lexically_normal().string()}, {"fingerprint", fingerprint}};
+}
+} // namespace
+
+nlohmann::json preoperativeFingerprint(RunContext& context)
 {
   const RunOptions& options = context.options();
-  auto entry = [](const fs::path& path, const std::string& fingerprint) {
-    return nlohmann::json{{"path", fs::absolute(path).lexically_normal().string()}, {"fingerprint", fingerprint}};
-  };
-  return {{"preop_image", entry(options.preopImage, fingerprintOf(context.preopImage("register")))},
-          {"preop_labels", entry(options.preopLabels, fingerprintOf(context.preopLabels("register")))},
-          {"intraop_image", entry(options.intraopImage, fingerprintOf(context.intraopImage("register")))}};
+  return {{"preop_image", fingerprintEntry(options.preopImage, fingerprintOf(context.preopImage("register")))},
+          {"preop_labels", fingerprintEntry(options.preopLabels, fingerprintOf(context.preopLabels("register")))}};
+}
+
+nlohmann::json caseFingerprint(RunContext& context)
+{
+  nlohmann::json fingerprint = preoperativeFingerprint(context);
+  fingerprint["intraop_image"] = fingerprintEntry(context.options().intraopImage, fingerprintOf(context.intraopImage("register")));
+  return fingerprint;
 }
 
 void claimCaseForStage(RunContext& context, const std::string& stage)
@@ -337,7 +352,8 @@ void runRegistration(RunContext& context)
   context.usePreviousScan(fingerprint);
   context.report().set("case_inputs", fingerprint);
   if (!context.options().previous.empty()) {
-    context.report().set("previous_scan", fs::absolute(context.options().previous).lexically_normal().string());
+    context.report().set(context.options().previousIsPreparation ? "prepared_case" : "previous_scan",
+                         fs::absolute(context.options().previous).lexically_normal().string());
   }
   try {
     runPipeline(context);

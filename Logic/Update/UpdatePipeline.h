@@ -40,6 +40,8 @@ struct RunOptions {
   /// An earlier scan's output folder of the same case (register --previous): its rigid transform
   /// starts the registration, its prototypes classify, its mesh and preoperative surface fit are reused.
   std::filesystem::path previous;
+  /// `previous` is the folder a session prepared before surgery (runPreparation), not a scan.
+  bool previousIsPreparation = false;
   bool overwrite = false; ///< register into a folder holding another case's results
 };
 
@@ -195,5 +197,16 @@ void runMeshStage(RunContext& context);
 void runSurfaceStage(RunContext& context);
 void runWarpStage(RunContext& context);
 void runRefineStage(RunContext& context); ///< RefineStage.cxx
+
+/// Before surgery, into the context's output folder, from the preoperative data alone: the mesh
+/// (mesh.vtu), the preoperative brain surface with each node's preoperative boundary
+/// (brain_surface.vtp: what a scan's surface stage reuses) and, in a session, the served finite
+/// element worker partitioned and assembled on them. A first scan given this folder as its
+/// `previous` (with previousIsPreparation) reuses the mesh, the boundary and the worker. The
+/// context's report needs "case_inputs" (preoperativeFingerprint) for that.
+void runPreparation(RunContext& context);
+
+/// caseFingerprint's preoperative part (the image and the labels).
+nlohmann::json preoperativeFingerprint(RunContext& context);
 
 } // namespace brainshift

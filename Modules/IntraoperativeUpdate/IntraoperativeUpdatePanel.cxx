@@ -307,12 +307,15 @@ void IntraoperativeUpdatePanel::prepareCase()
   }
   joinWorker();
   preparing_ = true;
-  status_->setText(tr("Reading and checking the preoperative data..."));
+  status_->setText(tr("Preparing the case: reading and checking the preoperative data..."));
   updateControls();
   worker_ = std::thread([logic, panel = QPointer<IntraoperativeUpdatePanel>(this)] {
     std::string error;
     try {
-      logic->prepare();
+      logic->prepare([panel](const UpdateProgress& step) { // the mesh, the preoperative boundary, the served worker
+        const QString line = QString::fromStdString(step.message.empty() ? "preparing: " + step.stage : step.message);
+        onGuiThread(panel, [line](IntraoperativeUpdatePanel& self) { self.status_->setText(line); });
+      });
     } catch (const std::exception& e) {
       error = e.what();
     }

@@ -187,10 +187,17 @@ WatchSession)
     done
     [ "$(json_value "$out/session/$scan/report.json" "['stages']['simulate']['served']")" = "True" ] || fail "$scan: not served"
   done
-  [ "$(json_value "$out/session/scan-01/report.json" "['stages']['simulate']['worker_prepared']")" = "True" ] ||
-    fail "the first scan did not prepare the worker"
-  [ "$(json_value "$out/session/scan-03/report.json" "['stages']['simulate']['worker_prepared']")" = "False" ] ||
-    fail "the later scan prepared a worker again"
+  # The worker, the mesh and the preoperative boundary were prepared before the first scan.
+  [ "$(json_value "$out/session/preoperative/report.json" "['stages']['worker']['prepared']")" = "True" ] ||
+    fail "the session did not prepare the worker before surgery"
+  [ -s "$out/session/preoperative/mesh.vtu" ] || fail "the session did not prepare the mesh before surgery"
+  for scan in scan-01 scan-03; do
+    [ "$(json_value "$out/session/$scan/report.json" "['stages']['simulate']['worker_prepared']")" = "False" ] ||
+      fail "$scan prepared a worker again"
+    json_value "$out/session/$scan/report.json" "['stages']['mesh']['reused_from']" >/dev/null 2>&1 || fail "$scan meshed again"
+  done
+  [ "$(json_value "$out/session/scan-01/report.json" "['prepared_case']")" = "$out/session/preoperative" ] ||
+    fail "the first scan does not name the prepared case"
   [ "$(json_value "$out/session/scan-03/report.json" "['previous_scan']")" = "$out/session/scan-01" ] ||
     fail "the later scan did not follow the last registered one"
   [ "$(json_value "$out/session/scan-03/report.json" "['stages']['mesh']['reused_from']")" = "$out/session/scan-01/mesh.vtu" ] ||
