@@ -322,8 +322,12 @@ void IntraoperativeUpdatePanel::prepareCase()
     onGuiThread(panel, [logic, error](IntraoperativeUpdatePanel& self) {
       self.preparing_ = false;
       if (error.empty()) self.logic_ = logic;
-      self.status_->setText(error.empty() ? tr("Case prepared. Watch the scanner's folder or load a scan.")
-                                          : tr("The case cannot be prepared: %1").arg(QString::fromStdString(error)));
+      QString message = error.empty() ? tr("Case prepared. Watch the scanner's folder or load a scan.")
+                                      : tr("The case cannot be prepared: %1").arg(QString::fromStdString(error));
+      if (error.find("earlier watch session") != std::string::npos) {
+        message += tr(" (here: tick \"Replace an earlier session in this folder\", or choose another folder)");
+      }
+      self.status_->setText(message);
       self.updateControls();
       emit self.prepared(error.empty());
       self.startNextScan();

@@ -180,5 +180,14 @@ int IntraoperativeUpdatePanelTest(int argc, char* argv[])
     BS_CHECK(axial->background() == shownAgain);
     panel.stopWatching();
     BS_CHECK(!panel.isWatching());
+
+    // Another session in the same folder is refused, and the panel says how to replace it.
+    IntraoperativeUpdatePanel another(scene, context);
+    QSignalSpy anotherPrepared(&another, &IntraoperativeUpdatePanel::prepared);
+    another.setCase(QString::fromStdString(files.preopImage.string()), QString::fromStdString(files.preopLabels.string()), {},
+                    QString::fromStdString((root / "session").string()));
+    another.prepareCase();
+    BS_CHECK(anotherPrepared.wait(60000) && anotherPrepared.takeFirst().at(0).toBool() == false);
+    BS_CHECK_MSG(another.statusText().contains("Replace an earlier session"), another.statusText().toStdString());
   });
 }
