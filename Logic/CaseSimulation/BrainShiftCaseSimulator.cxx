@@ -716,10 +716,18 @@ CaseFiles::CaseFiles(const fs::path& caseFolder)
 }
 
 // ---- The simulation -----------------------------------------------------------------------
-SimulatedCase simulateCase(const CaseParameters& P)
+namespace {
+
+using Euler = itk::Euler3DTransform<double>;
+using DoubleField = itk::Image<itk::Vector<double, 3>, 3>;
+
+/// The Colin27 T1 and its brain-extracted image as a 0/1 mask, both at 2 mm for the small case.
+struct Colin27 {
+  ScalarImage::Pointer t1, brain;
+};
+
+Colin27 readColin27(const CaseParameters& P, bool small)
 {
-  P.validate();
-  const bool small = P.size == CaseSize::Small;
   const fs::path t1Path = P.templateFolder / "ch2.nii.gz";
   const fs::path betPath = P.templateFolder / "ch2bet.nii.gz";
   for (const fs::path& path : {t1Path, betPath}) {
@@ -742,22 +750,45 @@ SimulatedCase simulateCase(const CaseParameters& P)
     t1 = downsampleByTwo(t1);
     bet = downsampleByTwo(bet);
   }
-  const Grid G = Grid::of(t1.GetPointer());
-  const std::size_t N = G.count();
-  const double voxelMl = G.spacing[0] * G.spacing[1] * G.spacing[2] / 1000.0;
-  std::mt19937_64 rng(P.seed);
-  SimulatedCase result;
-  CaseFigures& figures = result.figures;
+  return {t1, bet};
+}
 
-  // -- Brain and head masks.
+/// The means of the template's CSF, grey and white matter inside the brain.
+struct TissueMeans {
+  double csf = 0, grey = 0, white = 0;
+};
+
+/// The preoperative anatomy on the template's grid, as every later phase reads it.
+struct Anatomy {
+  Grid G;
+  std::size_t N = 0;
+  double voxelMl = 0;
+  ScalarImage::Pointer t1;
+  MaskImage::Pointer brainMask, headMask, ventricleMask;
+  ScalarImage::Pointer brainDistance; ///< signed distance to the brain's surface, mm (negative inside)
+  TissueMeans tissue;
+  Vec3 brainCentroid{0, 0, 0};
+
+  const float* intensity() const { return t1->GetBufferPointer(); }
+  const unsigned char* brain() const { return brainMask->GetBufferPointer(); }
+  const unsigned char* head() const { return headMask->GetBufferPointer(); }
+  const unsigned char* ventricles() const { return ventricleMask->GetBufferPointer(); }
+  const float* brainDepth() const { return brainDistance->GetBufferPointer(); }
+};
+
+MaskImage::Pointer brainMaskOf(const ScalarImage* brainExtracted, const Grid& G)
+{
   auto brainMask = newImage<MaskImage>(G, 0);
-  for (std::size_t i = 0; i < N; ++i) brainMask->GetBufferPointer()[i] = bet->GetBufferPointer()[i] >= 0.5f;
+  for (std::size_t i = 0; i < G.count(); ++i) brainMask->GetBufferPointer()[i] = brainExtracted->GetBufferPointer()[i] >= 0.5f;
   brainMask = largestComponent(brainMask);
   fillHolesPerSlice(brainMask, G);
-  const unsigned char* brain = brainMask->GetBufferPointer();
+  return brainMask;
+}
 
-  const float* intensity = t1->GetBufferPointer();
-  const float maxIntensity = *std::max_element(intensity, intensity + N);
+/// The head: brighter than half the template's two-class Otsu threshold, or brain, in one piece.
+MaskImage::Pointer headMaskOf(const float* intensity, float maxIntensity, const unsigned char* brain, const Grid& G)
+{
+  const std::size_t N = G.count();
   const double headThreshold = 0.5 * otsuThresholds(intensity, N, 2, 0, maxIntensity)[0];
   auto headMask = newImage<MaskImage>(G, 0);
   for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = intensity[i] > headThreshold || brain[i];
@@ -771,9 +802,12 @@ SimulatedCase simulateCase(const CaseParameters& P)
     for (std::size_t i = 0; i < N; ++i) headMask->GetBufferPointer()[i] = inside->GetBufferPointer()[i] <= -2.0f || brain[i];
   }
   fillHolesPerSlice(headMask, G);
-  const unsigned char* head = headMask->GetBufferPointer();
+  return headMask;
+}
 
-  // -- Tissue intensities: CSF, grey and white matter by three-class Otsu inside the brain.
+/// CSF, grey and white matter by three-class Otsu inside the brain.
+TissueMeans tissueMeansOf(const float* intensity, float maxIntensity, const unsigned char* brain, std::size_t N)
+{
   const std::vector<double> brainThresholds = otsuThresholds(intensity, N, 3, 0, maxIntensity, brain);
   double classSum[3] = {0, 0, 0}, classCount[3] = {0, 0, 0};
   for (std::size_t i = 0; i < N; ++i) {
@@ -782,82 +816,113 @@ SimulatedCase simulateCase(const CaseParameters& P)
     classSum[c] += intensity[i];
     classCount[c] += 1;
   }
-  const double csfMean = classSum[0] / classCount[0], greyMean = classSum[1] / classCount[1],
-               whiteMean = classSum[2] / classCount[2];
+  TissueMeans means;
+  means.csf = classSum[0] / classCount[0];
+  means.grey = classSum[1] / classCount[1];
+  means.white = classSum[2] / classCount[2];
+  return means;
+}
 
-  // -- Ventricles: the ventricular system is the thick dark CSF (opened by 1.5 mm, so that thin
-  //    sulcal CSF drops out) at least 4 mm inside the brain that connects to a seed: dark CSF at
-  //    least 12 mm deep within 40 mm of the brain's centre, in pieces of 1 ml or more.
-  ScalarImage::Pointer brainDistance = signedDistanceMm(brainMask);
-  const float* brainDepth = brainDistance->GetBufferPointer();
-  Vec3 brainCentroid{0, 0, 0};
-  double brainCount = 0;
-  for (std::size_t i = 0; i < N; ++i) {
-    if (brain[i]) {
-      brainCentroid = brainCentroid + G.pointOf(i);
-      brainCount += 1;
+Vec3 centroidOf(const Grid& G, const unsigned char* mask)
+{
+  Vec3 centroid{0, 0, 0};
+  double count = 0;
+  for (std::size_t i = 0; i < G.count(); ++i) {
+    if (mask[i]) {
+      centroid = centroid + G.pointOf(i);
+      count += 1;
     }
   }
-  brainCentroid = (1.0 / brainCount) * brainCentroid;
-  auto ventricleMask = newImage<MaskImage>(G, 0);
-  const double csfThreshold = 0.5 * (csfMean + greyMean);
-  std::vector<unsigned char> darkDeep(N);
-  for (std::size_t i = 0; i < N; ++i) {
+  return (1.0 / count) * centroid;
+}
+
+/// A morphological opening of `mask` by `radiusMm`, through distance maps.
+void openMask(MaskImage* mask, const Grid& G, double radiusMm)
+{
+  unsigned char* m = mask->GetBufferPointer();
+  ScalarImage::Pointer toMask = signedDistanceMm(mask);
+  auto eroded = newImage<MaskImage>(G, 0);
+  for (std::size_t i = 0; i < G.count(); ++i) eroded->GetBufferPointer()[i] = toMask->GetBufferPointer()[i] <= -radiusMm + 1e-3;
+  ScalarImage::Pointer toEroded = signedDistanceMm(eroded);
+  for (std::size_t i = 0; i < G.count(); ++i) m[i] = m[i] && toEroded->GetBufferPointer()[i] <= radiusMm + 1e-3;
+}
+
+/// Keeps the connected pieces of `mask` of 1 ml or more that hold at least 0.2 ml of seed: voxels at
+/// least 12 mm deep within 40 mm of the brain's centre.
+void keepSeededPieces(MaskImage* mask, const Anatomy& a)
+{
+  auto components = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
+  components->SetInput(mask);
+  components->Update();
+  const unsigned* component = components->GetOutput()->GetBufferPointer();
+  const float* brainDepth = a.brainDepth();
+  std::map<unsigned, std::size_t> seedVoxels, size;
+  for (std::size_t i = 0; i < a.N; ++i) {
+    if (!component[i]) continue;
+    size[component[i]] += 1;
+    if (brainDepth[i] <= -12.0f && norm(a.G.pointOf(i) - a.brainCentroid) < 40.0) seedVoxels[component[i]] += 1;
+  }
+  const double minimumVoxels = 1.0 / a.voxelMl;
+  for (std::size_t i = 0; i < a.N; ++i) {
+    const unsigned c = component[i];
+    mask->GetBufferPointer()[i] = c && double(seedVoxels[c]) * a.voxelMl >= 0.2 && double(size[c]) >= minimumVoxels;
+  }
+}
+
+/// The ventricular system is the thick dark CSF (opened by 1.5 mm, so that thin sulcal CSF drops
+/// out) at least 4 mm inside the brain that connects to a seed: dark CSF at least 12 mm deep within
+/// 40 mm of the brain's centre, in pieces of 1 ml or more.
+MaskImage::Pointer ventricleMaskOf(const Anatomy& a)
+{
+  const unsigned char* brain = a.brain();
+  const float* brainDepth = a.brainDepth();
+  const float* intensity = a.intensity();
+  auto ventricleMask = newImage<MaskImage>(a.G, 0);
+  const double csfThreshold = 0.5 * (a.tissue.csf + a.tissue.grey);
+  std::vector<unsigned char> darkDeep(a.N);
+  for (std::size_t i = 0; i < a.N; ++i) {
     darkDeep[i] = brain[i] && brainDepth[i] <= -4.0f && intensity[i] < csfThreshold;
     ventricleMask->GetBufferPointer()[i] = darkDeep[i];
   }
+  openMask(ventricleMask, a.G, 1.5);
+  keepSeededPieces(ventricleMask, a);
+  // Give back what the opening trimmed: the dark CSF within 2 mm of the ventricles kept.
+  ScalarImage::Pointer toVentricles = signedDistanceMm(ventricleMask);
+  for (std::size_t i = 0; i < a.N; ++i) {
+    ventricleMask->GetBufferPointer()[i] = darkDeep[i] && toVentricles->GetBufferPointer()[i] <= 2.0f;
+  }
+  return ventricleMask;
+}
+
+Anatomy preoperativeAnatomy(const CaseParameters& P, bool small)
+{
+  const Colin27 colin = readColin27(P, small);
+  Anatomy a;
+  a.t1 = colin.t1;
+  a.G = Grid::of(a.t1.GetPointer());
+  a.N = a.G.count();
+  a.voxelMl = a.G.spacing[0] * a.G.spacing[1] * a.G.spacing[2] / 1000.0;
+  a.brainMask = brainMaskOf(colin.brain, a.G);
+  const float* intensity = a.intensity();
+  const float maxIntensity = *std::max_element(intensity, intensity + a.N);
+  a.headMask = headMaskOf(intensity, maxIntensity, a.brain(), a.G);
+  a.tissue = tissueMeansOf(intensity, maxIntensity, a.brain(), a.N);
+  a.brainDistance = signedDistanceMm(a.brainMask);
+  a.brainCentroid = centroidOf(a.G, a.brain());
+  a.ventricleMask = ventricleMaskOf(a);
+  return a;
+}
+
+/// The tumour: an irregular ellipsoid, its surface bent by six seeded harmonics.
+struct TumourShape {
+  Vec3 centre{}, axis{}, e1{}, e2{};
+  Vec3 semiAxes{13.0, 10.5, 10.0};
+  double harmonics[6]{};
+
+  /// The ellipsoidal radius of `p`, < 1 inside.
+  double radiusAt(const Vec3& p) const
   {
-    const double radius = 1.5;
-    ScalarImage::Pointer toDark = signedDistanceMm(ventricleMask);
-    auto eroded = newImage<MaskImage>(G, 0);
-    for (std::size_t i = 0; i < N; ++i) eroded->GetBufferPointer()[i] = toDark->GetBufferPointer()[i] <= -radius + 1e-3;
-    ScalarImage::Pointer toEroded = signedDistanceMm(eroded);
-    for (std::size_t i = 0; i < N; ++i) {
-      ventricleMask->GetBufferPointer()[i] = ventricleMask->GetBufferPointer()[i] && toEroded->GetBufferPointer()[i] <= radius + 1e-3;
-    }
-    auto components = itk::ConnectedComponentImageFilter<MaskImage, itk::Image<unsigned, 3>>::New();
-    components->SetInput(ventricleMask);
-    components->Update();
-    const unsigned* component = components->GetOutput()->GetBufferPointer();
-    std::map<unsigned, std::size_t> seedVoxels, size;
-    for (std::size_t i = 0; i < N; ++i) {
-      if (!component[i]) continue;
-      size[component[i]] += 1;
-      if (brainDepth[i] <= -12.0f && norm(G.pointOf(i) - brainCentroid) < 40.0) seedVoxels[component[i]] += 1;
-    }
-    const double minimumVoxels = 1.0 / voxelMl;
-    for (std::size_t i = 0; i < N; ++i) {
-      const unsigned c = component[i];
-      ventricleMask->GetBufferPointer()[i] = c && double(seedVoxels[c]) * voxelMl >= 0.2 && double(size[c]) >= minimumVoxels;
-    }
-    // Give back what the opening trimmed: the dark CSF within 2 mm of the ventricles kept.
-    ScalarImage::Pointer toVentricles = signedDistanceMm(ventricleMask);
-    for (std::size_t i = 0; i < N; ++i) {
-      ventricleMask->GetBufferPointer()[i] = darkDeep[i] && toVentricles->GetBufferPointer()[i] <= 2.0f;
-    }
-  }
-  const unsigned char* ventricles = ventricleMask->GetBufferPointer();
-
-  // -- The craniotomy: where the outward ray from the brain's centroid leaves the brain.
-  const Vec3 axis = craniotomyDirection(P.craniotomy);
-  Vec3 craniotomyCentre = brainCentroid;
-  for (double t = 0; t < 150; t += 0.25) {
-    const Vec3 p = brainCentroid + t * axis;
-    if (sampleNearest<unsigned char>(G, brain, p, 0)) craniotomyCentre = p;
-  }
-  const double lateralSigma = 25.0, decayLength = 35.0, openingRadius = 30.0;
-
-  // -- The tumour: an irregular ellipsoid 22 mm below the craniotomy, with a T1 post-contrast look
-  //    (hypointense core, enhancing rim).
-  const Vec3 tumourCentre = craniotomyCentre - 22.0 * axis;
-  const Vec3 semiAxes{13.0, 10.5, 10.0};
-  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
-  double harmonics[6];
-  for (double& h : harmonics) h = 0.1 * uniform(rng);
-  const Vec3 e1 = normalized({-axis[1], axis[0], 0.0 + 1e-9});
-  const Vec3 e2 = {axis[1] * e1[2] - axis[2] * e1[1], axis[2] * e1[0] - axis[0] * e1[2], axis[0] * e1[1] - axis[1] * e1[0]};
-  auto tumourRadius = [&](const Vec3& p) { // < 1 inside
-    const Vec3 d = p - tumourCentre;
+    const Vec3 d = p - centre;
     const Vec3 local{dot(d, e1) / semiAxes[0], dot(d, e2) / semiAxes[1], dot(d, axis) / semiAxes[2]};
     const double rho = norm(local);
     if (rho < 1e-9) return 0.0;
@@ -866,35 +931,77 @@ SimulatedCase simulateCase(const CaseParameters& P)
                         harmonics[2] * std::cos(2 * theta) + harmonics[3] * std::sin(theta) * std::cos(phi) +
                         harmonics[4] * std::cos(3 * theta) + harmonics[5] * std::sin(2 * phi) * std::sin(theta);
     return rho / (1.0 + bump);
-  };
+  }
+  double meanSemiAxis() const { return (semiAxes[0] + semiAxes[1] + semiAxes[2]) / 3.0; }
+};
 
-  // -- Preoperative labels and image.
-  result.preopLabels = newImage<LabelImage>(G, Background);
-  result.preopImage = newImage<ScalarImage>(G, 0.0f);
+/// The surgery: the craniotomy, the widths of the subsidence under it, and the tumour below it.
+struct Surgery {
+  Vec3 axis{}, craniotomyCentre{};
+  double lateralSigma = 25.0, decayLength = 35.0, openingRadius = 30.0;
+  TumourShape tumour;
+};
+
+/// The craniotomy where the outward ray from the brain's centroid leaves the brain; the tumour 22 mm
+/// below it, with a T1 post-contrast look (hypointense core, enhancing rim).
+Surgery plannedSurgery(const CaseParameters& P, const Anatomy& a, std::mt19937_64& rng)
+{
+  Surgery s;
+  const Vec3 axis = craniotomyDirection(P.craniotomy);
+  s.axis = axis;
+  s.craniotomyCentre = a.brainCentroid;
+  for (double t = 0; t < 150; t += 0.25) {
+    const Vec3 p = a.brainCentroid + t * axis;
+    if (sampleNearest<unsigned char>(a.G, a.brain(), p, 0)) s.craniotomyCentre = p;
+  }
+  TumourShape& tumour = s.tumour;
+  tumour.centre = s.craniotomyCentre - 22.0 * axis;
+  tumour.axis = axis;
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  for (double& h : tumour.harmonics) h = 0.1 * uniform(rng);
+  const Vec3 e1 = normalized({-axis[1], axis[0], 0.0 + 1e-9});
+  tumour.e1 = e1;
+  tumour.e2 = {axis[1] * e1[2] - axis[2] * e1[1], axis[2] * e1[0] - axis[0] * e1[2], axis[0] * e1[1] - axis[1] * e1[0]};
+  return s;
+}
+
+/// The preoperative T1 inside the tumour (`texture` about 1 gives it a grain).
+double tumourIntensity(TumourAppearance appearance, double rho, double texture, const TissueMeans& tissue)
+{
+  const double whiteMean = tissue.white, greyMean = tissue.grey;
+  switch (appearance) {
+  case TumourAppearance::RimEnhancing: {
+    const double rim = std::clamp((rho - 0.7) / 0.15, 0.0, 1.0);
+    return texture * (0.45 * whiteMean + rim * (1.1 - 0.45) * whiteMean);
+  }
+  case TumourAppearance::Hypointense: return texture * 0.5 * whiteMean;
+  case TumourAppearance::NearlyIsointense: return texture * 0.95 * 0.5 * (greyMean + whiteMean);
+  }
+  return 0;
+}
+
+/// The preoperative labels and image: the template's anatomy with the tumour painted in.
+void paintPreoperativeCase(const CaseParameters& P, const Anatomy& a, const TumourShape& tumour, SimulatedCase& result)
+{
+  result.preopLabels = newImage<LabelImage>(a.G, Background);
+  result.preopImage = newImage<ScalarImage>(a.G, 0.0f);
   LabelPixel* labels = result.preopLabels->GetBufferPointer();
   float* preop = result.preopImage->GetBufferPointer();
-  const double meanAxis = (semiAxes[0] + semiAxes[1] + semiAxes[2]) / 3.0;
-  parallelFor(N, [&](std::size_t i) {
-    const Vec3 p = G.pointOf(i);
+  const unsigned char *brain = a.brain(), *head = a.head(), *ventricles = a.ventricles();
+  const float *intensity = a.intensity(), *brainDepth = a.brainDepth();
+  const double meanAxis = tumour.meanSemiAxis();
+  parallelFor(a.N, [&](std::size_t i) {
+    const Vec3 p = a.G.pointOf(i);
     LabelPixel label = brain[i] ? Parenchyma : head[i] ? Head : Background;
     if (brain[i] && ventricles[i]) label = Ventricles;
     double value = intensity[i];
     if (brain[i] && brainDepth[i] <= -3.0f) {
-      const double rho = tumourRadius(p);
+      const double rho = tumour.radiusAt(p);
       // Partial volume over about 1 mm at the tumour's edge.
       const double alpha = std::clamp(0.5 + (1.0 - rho) * meanAxis / 1.0, 0.0, 1.0);
       if (alpha > 0) {
         const double texture = 1.0 + 0.05 * (2.0 * hashUniform(P.seed, i) - 1.0);
-        double tumourValue = 0;
-        switch (P.tumourAppearance) {
-        case TumourAppearance::RimEnhancing: {
-          const double rim = std::clamp((rho - 0.7) / 0.15, 0.0, 1.0);
-          tumourValue = texture * (0.45 * whiteMean + rim * (1.1 - 0.45) * whiteMean);
-          break;
-        }
-        case TumourAppearance::Hypointense: tumourValue = texture * 0.5 * whiteMean; break;
-        case TumourAppearance::NearlyIsointense: tumourValue = texture * 0.95 * 0.5 * (greyMean + whiteMean); break;
-        }
+        const double tumourValue = tumourIntensity(P.tumourAppearance, rho, texture, a.tissue);
         value = (1 - alpha) * value + alpha * tumourValue;
       }
       if (rho <= 1.0) label = Tumour;
@@ -902,103 +1009,145 @@ SimulatedCase simulateCase(const CaseParameters& P)
     labels[i] = label;
     preop[i] = float(value);
   });
+}
 
-  // -- fMRI: a t-map on a 3 mm grid, two activations near the tumour and one deactivation.
-  {
-    Grid F = G;
-    const Vec3 extent{G.spacing[0] * G.size[0], G.spacing[1] * G.size[1], G.spacing[2] * G.size[2]};
-    for (int i = 0; i < 3; ++i) {
-      F.spacing[i] = 3.0;
-      F.size[i] = std::size_t(std::ceil(extent[i] / 3.0));
-    }
-    F.origin = G.point(-0.5 + 1.5 / G.spacing[0], -0.5 + 1.5 / G.spacing[1], -0.5 + 1.5 / G.spacing[2]);
-    result.preopFmri = newImage<ScalarImage>(F, 0.0f);
-    float* t = result.preopFmri->GetBufferPointer();
-    // Cortical points: surface points in directions tilted from the craniotomy axis, 6 mm deep.
-    auto corticalPoint = [&](const Vec3& direction) {
-      Vec3 surface = brainCentroid;
-      for (double s = 0; s < 150; s += 0.5) {
-        const Vec3 p = brainCentroid + s * direction;
-        if (sampleNearest<unsigned char>(G, brain, p, 0)) surface = p;
-      }
-      return surface - 6.0 * direction;
-    };
-    const Vec3 motor = corticalPoint(normalized(axis + Vec3{0, 0.45, 0.1}));
-    const Vec3 language = corticalPoint(normalized(axis + Vec3{0, -0.2, -0.45}));
-    const Vec3 deactivation = corticalPoint(normalized(Vec3{-axis[0], 0.8, 0.3}));
-    struct Blob { Vec3 centre; double peak, sigma; };
-    const Blob blobs[] = {{motor, 9.0, 5.0}, {language, 6.5, 4.0}, {deactivation, -4.5, 6.0}};
-    std::normal_distribution<double> gauss(0.0, 1.0);
-    std::vector<double> noise(F.count());
-    for (double& v : noise) v = gauss(rng);
-    for (std::size_t i = 0; i < F.count(); ++i) {
-      const Vec3 p = F.pointOf(i);
-      if (!sampleNearest<unsigned char>(G, brain, p, 0)) continue;
-      double value = 0.8 * noise[i];
-      for (const Blob& b : blobs) {
-        const double d = norm(p - b.centre);
-        value += b.peak * std::exp(-d * d / (2 * b.sigma * b.sigma));
-      }
-      t[i] = float(value);
-    }
+/// A point of the cortex: where the ray from the brain's centroid along `direction` leaves the
+/// brain, 6 mm deep.
+Vec3 corticalPoint(const Anatomy& a, const Vec3& direction)
+{
+  Vec3 surface = a.brainCentroid;
+  for (double s = 0; s < 150; s += 0.5) {
+    const Vec3 p = a.brainCentroid + s * direction;
+    if (sampleNearest<unsigned char>(a.G, a.brain(), p, 0)) surface = p;
   }
+  return surface - 6.0 * direction;
+}
 
-  // -- The subsidence field w on a 4 mm grid over the preoperative field of view: smooth on the
-  //    scale of its 25 mm profile, and small enough to keep in the truth transform file.
-  Grid W = G;
-  {
-    const Vec3 extent{G.spacing[0] * (G.size[0] - 1), G.spacing[1] * (G.size[1] - 1), G.spacing[2] * (G.size[2] - 1)};
-    for (int i = 0; i < 3; ++i) {
-      W.spacing[i] = 4.0;
-      W.size[i] = std::size_t(std::ceil(extent[i] / 4.0)) + 1;
-    }
-    W.origin = G.origin;
+/// fMRI: a t-map on a 3 mm grid, two activations near the tumour and one deactivation, in noise.
+ScalarImage::Pointer simulatedFmri(const Anatomy& a, const Vec3& axis, std::mt19937_64& rng)
+{
+  const Grid& G = a.G;
+  Grid F = G;
+  const Vec3 extent{G.spacing[0] * G.size[0], G.spacing[1] * G.size[1], G.spacing[2] * G.size[2]};
+  for (int i = 0; i < 3; ++i) {
+    F.spacing[i] = 3.0;
+    F.size[i] = std::size_t(std::ceil(extent[i] / 3.0));
   }
-  using DoubleField = itk::Image<itk::Vector<double, 3>, 3>;
-  auto field = DoubleField::New();
-  W.applyTo(field.GetPointer());
-  itk::Vector<double, 3>* w = field->GetBufferPointer();
-  auto sinking = [&](const Vec3& p) { // the analytic model, outward along the axis
-    const Vec3 d = p - craniotomyCentre;
-    const double along = dot(d, axis);
-    const double depth = -along; // below the preoperative surface point
-    const double r2 = dot(d, d) - along * along;
-    const double subsidence = P.shiftMillimetres * std::exp(-r2 / (2 * lateralSigma * lateralSigma));
-    return subsidence * std::exp(-std::max(depth - subsidence, 0.0) / decayLength);
-  };
+  F.origin = G.point(-0.5 + 1.5 / G.spacing[0], -0.5 + 1.5 / G.spacing[1], -0.5 + 1.5 / G.spacing[2]);
+  ScalarImage::Pointer fmri = newImage<ScalarImage>(F, 0.0f);
+  float* t = fmri->GetBufferPointer();
+  // Cortical points in directions tilted from the craniotomy axis.
+  const Vec3 motor = corticalPoint(a, normalized(axis + Vec3{0, 0.45, 0.1}));
+  const Vec3 language = corticalPoint(a, normalized(axis + Vec3{0, -0.2, -0.45}));
+  const Vec3 deactivation = corticalPoint(a, normalized(Vec3{-axis[0], 0.8, 0.3}));
+  struct Blob { Vec3 centre; double peak, sigma; };
+  const Blob blobs[] = {{motor, 9.0, 5.0}, {language, 6.5, 4.0}, {deactivation, -4.5, 6.0}};
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::vector<double> noise(F.count());
+  for (double& v : noise) v = gauss(rng);
+  for (std::size_t i = 0; i < F.count(); ++i) {
+    const Vec3 p = F.pointOf(i);
+    if (!sampleNearest<unsigned char>(G, a.brain(), p, 0)) continue;
+    double value = 0.8 * noise[i];
+    for (const Blob& b : blobs) {
+      const double d = norm(p - b.centre);
+      value += b.peak * std::exp(-d * d / (2 * b.sigma * b.sigma));
+    }
+    t[i] = float(value);
+  }
+  return fmri;
+}
+
+/// The true subsidence field w on its own grid (double vectors): tissue at x' came from x' + w(x').
+struct Subsidence {
+  Grid W;
+  DoubleField::Pointer field;
+
+  const itk::Vector<double, 3>* w() const { return field->GetBufferPointer(); }
+  Vec3 at(const Vec3& p) const { return sampleField(W, w(), p); }
+};
+
+/// The analytic model of the kinematic truth: the sinking at `p`, outward along the axis.
+double kinematicSinking(const CaseParameters& P, const Surgery& s, const Vec3& p)
+{
+  const Vec3 d = p - s.craniotomyCentre;
+  const double along = dot(d, s.axis);
+  const double depth = -along; // below the preoperative surface point
+  const double r2 = dot(d, d) - along * along;
+  const double subsidence = P.shiftMillimetres * std::exp(-r2 / (2 * s.lateralSigma * s.lateralSigma));
+  return subsidence * std::exp(-std::max(depth - subsidence, 0.0) / s.decayLength);
+}
+
+/// The subsidence field w on a 4 mm grid over the preoperative field of view: smooth on the scale of
+/// its 25 mm profile, and small enough to keep in the truth transform file. Kinematic, or from the
+/// finite element truth (whose figures go into `figures`).
+Subsidence trueSubsidence(const CaseParameters& P, bool small, const Grid& G, const Surgery& s, const LabelImage& preopLabels,
+                          CaseFigures& figures)
+{
+  Subsidence result;
+  Grid& W = result.W;
+  W = G;
+  const Vec3 extent{G.spacing[0] * (G.size[0] - 1), G.spacing[1] * (G.size[1] - 1), G.spacing[2] * (G.size[2] - 1)};
+  for (int i = 0; i < 3; ++i) {
+    W.spacing[i] = 4.0;
+    W.size[i] = std::size_t(std::ceil(extent[i] / 4.0)) + 1;
+  }
+  W.origin = G.origin;
+  result.field = DoubleField::New();
+  W.applyTo(result.field.GetPointer());
+  itk::Vector<double, 3>* w = result.field->GetBufferPointer();
   if (P.truth == TruthModel::Kinematic) {
     for (std::size_t i = 0; i < W.count(); ++i) {
-      const double s = sinking(W.pointOf(i));
-      for (int k = 0; k < 3; ++k) w[i][k] = s * axis[k];
+      const double sinking = kinematicSinking(P, s, W.pointOf(i));
+      for (int k = 0; k < 3; ++k) w[i][k] = sinking * s.axis[k];
     }
-  } else {
-    FiniteElementTruthParameters fe;
-    fe.craniotomyCentre = craniotomyCentre;
-    fe.craniotomyAxis = axis;
-    fe.shiftMm = P.shiftMillimetres;
-    fe.lateralSigmaMm = lateralSigma;
-    fe.openingRadiusMm = openingRadius;
-    fe.seed = P.seed;
-    if (small) fe.elementSizeMm = 10.0;
-    const FiniteElementTruthFigures f = solveFiniteElementTruth(*result.preopLabels, *field, fe);
-    figures.truthNodes = f.nodes;
-    figures.truthElements = f.elements;
-    figures.truthFoldedElements = f.invertedElements;
-    figures.truthSolverSeconds = f.ccxSeconds;
+    return result;
   }
+  FiniteElementTruthParameters fe;
+  fe.craniotomyCentre = s.craniotomyCentre;
+  fe.craniotomyAxis = s.axis;
+  fe.shiftMm = P.shiftMillimetres;
+  fe.lateralSigmaMm = s.lateralSigma;
+  fe.openingRadiusMm = s.openingRadius;
+  fe.seed = P.seed;
+  if (small) fe.elementSizeMm = 10.0;
+  const FiniteElementTruthFigures f = solveFiniteElementTruth(preopLabels, *result.field, fe);
+  figures.truthNodes = f.nodes;
+  figures.truthElements = f.elements;
+  figures.truthFoldedElements = f.invertedElements;
+  figures.truthSolverSeconds = f.ccxSeconds;
+  return result;
+}
 
-  // -- The deformed configuration on the preoperative grid.
-  auto deformedLabels = newImage<LabelImage>(G, Background);
-  auto deformedImage = newImage<ScalarImage>(G, 0.0f);
-  LabelPixel* dLabels = deformedLabels->GetBufferPointer();
-  float* dImage = deformedImage->GetBufferPointer();
-  // What each voxel of the preoperative brain holds now: tissue, the gap the brain sank away from,
-  // or the resection cavity (both intraoperative-only matter, label 0 in the truth).
-  std::vector<unsigned char> matter(N, Outside);
-  parallelFor(N, [&](std::size_t i) {
+/// The deformed configuration on the preoperative grid.
+struct DeformedConfiguration {
+  LabelImage::Pointer labels;
+  ScalarImage::Pointer image;
+  /// What each voxel of the preoperative brain holds now: tissue, the gap the brain sank away from,
+  /// or the resection cavity (both intraoperative-only matter, label 0 in the truth).
+  std::vector<unsigned char> matter;
+};
+
+/// The tissue moved by the subsidence, the resected tumour removed and the bone flap opened; the
+/// gap and the cavity still empty.
+DeformedConfiguration movedTissue(const CaseParameters& P, const Anatomy& a, const Surgery& s, const Subsidence& subsidence,
+                                  const SimulatedCase& result)
+{
+  const Grid& G = a.G;
+  DeformedConfiguration deformed;
+  deformed.labels = newImage<LabelImage>(G, Background);
+  deformed.image = newImage<ScalarImage>(G, 0.0f);
+  deformed.matter.assign(a.N, Outside);
+  LabelPixel* dLabels = deformed.labels->GetBufferPointer();
+  float* dImage = deformed.image->GetBufferPointer();
+  std::vector<unsigned char>& matter = deformed.matter;
+  const LabelPixel* labels = result.preopLabels->GetBufferPointer();
+  const float* preop = result.preopImage->GetBufferPointer();
+  const unsigned char *brain = a.brain(), *head = a.head();
+  parallelFor(a.N, [&](std::size_t i) {
     const Vec3 p = G.pointOf(i);
     if (brain[i]) {
-      const Vec3 source = p + sampleField(W, w, p);
+      const Vec3 source = p + subsidence.at(p);
       const LabelPixel sourceLabel = sampleNearest<LabelPixel>(G, labels, source, Background);
       if (sourceLabel >= Parenchyma) {
         dLabels[i] = sourceLabel;
@@ -1013,9 +1162,9 @@ SimulatedCase simulateCase(const CaseParameters& P)
       }
       return;
     }
-    const Vec3 d = p - craniotomyCentre;
-    const double along = dot(d, axis);
-    if (head[i] && along > 0 && dot(d, d) - along * along < openingRadius * openingRadius) {
+    const Vec3 d = p - s.craniotomyCentre;
+    const double along = dot(d, s.axis);
+    if (head[i] && along > 0 && dot(d, d) - along * along < s.openingRadius * s.openingRadius) {
       dLabels[i] = Background; // the bone flap and scalp are open
       dImage[i] = 0.0f;
       return;
@@ -1023,12 +1172,19 @@ SimulatedCase simulateCase(const CaseParameters& P)
     dLabels[i] = labels[i];
     dImage[i] = preop[i];
   });
-  // The fluid under the craniotomy and in the cavity is CSF and saline: as dark as the ventricles'
-  // CSF (the built-in case's dark gap and cavity keep their historical value, the CSF class mean).
-  double fluidValue = csfMean;
+  return deformed;
+}
+
+/// The fluid under the craniotomy and in the cavity is CSF and saline: as dark as the ventricles'
+/// CSF (the built-in case's dark gap and cavity keep their historical value, the CSF class mean).
+double fluidIntensity(const CaseParameters& P, const Anatomy& a, const SimulatedCase& result)
+{
+  double fluidValue = a.tissue.csf;
   if (P.gap == GapContent::FluidAndAir) {
+    const LabelPixel* labels = result.preopLabels->GetBufferPointer();
+    const float* preop = result.preopImage->GetBufferPointer();
     std::vector<float> ventricular;
-    for (std::size_t i = 0; i < N; ++i) {
+    for (std::size_t i = 0; i < a.N; ++i) {
       if (labels[i] == Ventricles) ventricular.push_back(preop[i]);
     }
     if (!ventricular.empty()) {
@@ -1036,91 +1192,121 @@ SimulatedCase simulateCase(const CaseParameters& P)
       fluidValue = ventricular[ventricular.size() / 2];
     }
   }
-  fillIntraoperativeMatter(P, G, axis, fluidValue, whiteMean, matter, dImage, figures);
-  if (P.contrast == IntraopContrast::T1PostContrast) {
-    enhanceAfterContrastAgent(G, matter, dLabels, brainDepth, craniotomyCentre, axis, openingRadius, whiteMean, dImage);
-  }
-  // -- The patient in the scanner: intraop point y = M(x'); the truth maps y back.
-  auto motion = itk::Euler3DTransform<double>::New();
-  {
-    Vec3 headCentre{0, 0, 0};
-    double count = 0;
-    for (std::size_t i = 0; i < N; ++i) {
-      if (head[i]) {
-        headCentre = headCentre + G.pointOf(i);
-        count += 1;
-      }
-    }
-    headCentre = (1.0 / count) * headCentre;
-    itk::Euler3DTransform<double>::CenterType centre;
-    itk::Euler3DTransform<double>::OutputVectorType translation;
-    for (int k = 0; k < 3; ++k) {
-      centre[k] = headCentre[k];
-      translation[k] = P.translationMillimetres[k];
-    }
-    motion->SetCenter(centre);
-    const double toRadians = M_PI / 180.0;
-    motion->SetRotation(P.rotationDegrees[0] * toRadians, P.rotationDegrees[1] * toRadians,
-                        P.rotationDegrees[2] * toRadians);
-    motion->SetTranslation(translation);
-  }
-  auto rigid = itk::Euler3DTransform<double>::New();
-  motion->GetInverse(rigid);
-  result.rigidIntraopToPreop = rigid.GetPointer();
-  {
-    auto composite = itk::CompositeTransform<double, 3>::New();
-    auto fieldTransform = itk::DisplacementFieldTransform<double, 3>::New();
-    fieldTransform->SetDisplacementField(field);
-    composite->AddTransform(fieldTransform); // applied second
-    composite->AddTransform(rigid);          // applied first
-    result.intraopToPreop = composite.GetPointer();
-  }
-  auto rigidPoint = [&](const Vec3& y) {
-    return toVec(rigid->TransformPoint(toPoint(y)));
-  };
+  return fluidValue;
+}
 
-  // -- The intraoperative grid: axial, centred on the moved brain.
+/// The deformed configuration with its intraoperative-only matter (gap, cavity) and, after
+/// gadolinium, its enhancement.
+DeformedConfiguration deformedConfiguration(const CaseParameters& P, const Anatomy& a, const Surgery& s,
+                                            const Subsidence& subsidence, SimulatedCase& result)
+{
+  DeformedConfiguration deformed = movedTissue(P, a, s, subsidence, result);
+  float* dImage = deformed.image->GetBufferPointer();
+  const double fluidValue = fluidIntensity(P, a, result);
+  fillIntraoperativeMatter(P, a.G, s.axis, fluidValue, a.tissue.white, deformed.matter, dImage, result.figures);
+  if (P.contrast == IntraopContrast::T1PostContrast) {
+    enhanceAfterContrastAgent(a.G, deformed.matter, deformed.labels->GetBufferPointer(), a.brainDepth(), s.craniotomyCentre,
+                              s.axis, s.openingRadius, a.tissue.white, dImage);
+  }
+  return deformed;
+}
+
+/// The patient in the scanner: intraoperative point y = M(x'), rotated about the head's centre.
+Euler::Pointer patientMotion(const CaseParameters& P, const Anatomy& a)
+{
+  auto motion = Euler::New();
+  const Vec3 headCentre = centroidOf(a.G, a.head());
+  Euler::CenterType centre;
+  Euler::OutputVectorType translation;
+  for (int k = 0; k < 3; ++k) {
+    centre[k] = headCentre[k];
+    translation[k] = P.translationMillimetres[k];
+  }
+  motion->SetCenter(centre);
+  const double toRadians = M_PI / 180.0;
+  motion->SetRotation(P.rotationDegrees[0] * toRadians, P.rotationDegrees[1] * toRadians, P.rotationDegrees[2] * toRadians);
+  motion->SetTranslation(translation);
+  return motion;
+}
+
+/// The truth maps y back: first the inverse of the motion (returned), then the subsidence field.
+Euler::Pointer setTruthTransforms(const Euler& motion, const Subsidence& subsidence, SimulatedCase& result)
+{
+  auto rigid = Euler::New();
+  motion.GetInverse(rigid);
+  result.rigidIntraopToPreop = rigid.GetPointer();
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  auto fieldTransform = itk::DisplacementFieldTransform<double, 3>::New();
+  fieldTransform->SetDisplacementField(subsidence.field);
+  composite->AddTransform(fieldTransform); // applied second
+  composite->AddTransform(rigid);          // applied first
+  result.intraopToPreop = composite.GetPointer();
+  return rigid;
+}
+
+/// The intraoperative grid: axial, centred on the moved brain; a slab centred between the
+/// craniotomy and the tumour when asked.
+Grid intraoperativeGrid(const CaseParameters& P, bool small, const Euler& motion, const Anatomy& a, const Surgery& s)
+{
   Grid I;
   I.size = small ? std::array<std::size_t, 3>{96, 96, 30} : std::array<std::size_t, 3>{256, 256, 60};
   I.spacing = small ? Vec3{2.5, 2.5, 5.0} : Vec3{0.9375, 0.9375, 2.5};
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) I.direction[r][c] = r == c ? 1.0 : 0.0;
   }
-  {
-    const Vec3 centre = toVec(motion->TransformPoint(toPoint(brainCentroid + Vec3{0, 0, 10})));
-    for (int k = 0; k < 3; ++k) I.origin[k] = centre[k] - 0.5 * I.spacing[k] * (I.size[k] - 1);
-  }
-  if (P.fieldOfView == FieldOfView::Slab) { // centred between the craniotomy and the tumour
-    const Vec3 middle = toVec(motion->TransformPoint(toPoint(0.5 * (craniotomyCentre + tumourCentre))));
+  const Vec3 centre = toVec(motion.TransformPoint(toPoint(a.brainCentroid + Vec3{0, 0, 10})));
+  for (int k = 0; k < 3; ++k) I.origin[k] = centre[k] - 0.5 * I.spacing[k] * (I.size[k] - 1);
+  if (P.fieldOfView == FieldOfView::Slab) {
+    const Vec3 middle = toVec(motion.TransformPoint(toPoint(0.5 * (s.craniotomyCentre + s.tumour.centre))));
     cutToSlab(I, middle[2], small);
   }
-  const std::size_t NI = I.count();
-  result.intraopImage = newImage<ScalarImage>(I, 0.0f);
-  result.intraopLabels = newImage<LabelImage>(I, Background);
-  float* intraop = result.intraopImage->GetBufferPointer();
-  LabelPixel* intraopLabels = result.intraopLabels->GetBufferPointer();
-  // The bias field: exp(strength * q) with q a random quadratic over the field of view, |q| <= 1.
-  double coefficients[9];
+  return I;
+}
+
+/// The bias field: exp(strength * q) with q a random quadratic over the field of view, |q| <= 1.
+struct BiasField {
+  double coefficients[9]{};
+  double scale = 1e-12; ///< the largest |quadratic| over the field of view
+
+  double quadratic(const Vec3& u) const
   {
-    std::normal_distribution<double> gauss(0.0, 1.0);
-    for (double& c : coefficients) c = gauss(rng);
-  }
-  auto quadratic = [&](const Vec3& u) {
     const double terms[9] = {u[0], u[1], u[2], u[0] * u[0], u[1] * u[1], u[2] * u[2], u[0] * u[1], u[0] * u[2], u[1] * u[2]};
     double q = 0;
     for (int k = 0; k < 9; ++k) q += coefficients[k] * terms[k];
     return q;
-  };
-  double biasScale = 1e-12;
+  }
+};
+
+BiasField randomBiasField(std::mt19937_64& rng)
+{
+  BiasField bias;
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  for (double& c : bias.coefficients) c = gauss(rng);
   for (int a = -4; a <= 4; ++a) {
     for (int b = -4; b <= 4; ++b) {
-      for (int c = -4; c <= 4; ++c) biasScale = std::max(biasScale, std::abs(quadratic({a / 4.0, b / 4.0, c / 4.0})));
+      for (int c = -4; c <= 4; ++c) bias.scale = std::max(bias.scale, std::abs(bias.quadratic({a / 4.0, b / 4.0, c / 4.0})));
     }
   }
-  const Grid Gd = G;
-  const float* deformed = dImage;
-  const IntensityMap contrast = intraopContrastMap(P.contrast, csfMean / whiteMean, greyMean / whiteMean);
-  parallelFor(NI, [&](std::size_t i) {
+  return bias;
+}
+
+/// The intraoperative scan of the deformed configuration seen through the rigid truth, and its true
+/// labels; another scanner with another contrast and a bias field, before noise.
+void scanIntraoperative(const CaseParameters& P, const Anatomy& a, const DeformedConfiguration& deformedCase, const Euler& rigid,
+                        const Grid& I, std::mt19937_64& rng, SimulatedCase& result)
+{
+  result.intraopImage = newImage<ScalarImage>(I, 0.0f);
+  result.intraopLabels = newImage<LabelImage>(I, Background);
+  float* intraop = result.intraopImage->GetBufferPointer();
+  LabelPixel* intraopLabels = result.intraopLabels->GetBufferPointer();
+  const BiasField biasField = randomBiasField(rng);
+  auto rigidPoint = [&](const Vec3& y) { return toVec(rigid.TransformPoint(toPoint(y))); };
+  const Grid& Gd = a.G;
+  const float* deformed = deformedCase.image->GetBufferPointer();
+  const LabelPixel* dLabels = deformedCase.labels->GetBufferPointer();
+  const double whiteMean = a.tissue.white;
+  const IntensityMap contrast = intraopContrastMap(P.contrast, a.tissue.csf / whiteMean, a.tissue.grey / whiteMean);
+  parallelFor(I.count(), [&](std::size_t i) {
     const auto idx = I.indexOf(i);
     double sum = 0;
     // The slice profile: three samples across the slice thickness.
@@ -1134,47 +1320,75 @@ SimulatedCase simulateCase(const CaseParameters& P)
     const double normalisedValue = std::max(sum / 3.0, 0.0) / whiteMean;
     const Vec3 u{2.0 * idx[0] / (I.size[0] - 1) - 1.0, 2.0 * idx[1] / (I.size[1] - 1) - 1.0,
                  2.0 * idx[2] / (I.size[2] - 1) - 1.0};
-    const double bias = std::exp(P.biasStrength * quadratic(u) / biasScale);
+    const double bias = std::exp(P.biasStrength * biasField.quadratic(u) / biasField.scale);
     intraop[i] = float(1000.0 * contrast(normalisedValue) * bias);
   });
-  {
-    // Rician noise, drawn in voxel order from the seeded generator.
-    std::normal_distribution<double> gauss(0.0, P.noiseFraction * 1000.0);
-    for (std::size_t i = 0; i < NI; ++i) {
-      const double real = intraop[i] + gauss(rng), imaginary = gauss(rng);
-      intraop[i] = float(std::round(std::sqrt(real * real + imaginary * imaginary)));
-    }
-  }
+}
 
-  // -- Figures.
-  figures.craniotomyCentre = toPoint(craniotomyCentre);
-  figures.craniotomyAxis = axis;
-  figures.tumourCentre = toPoint(tumourCentre);
-  figures.decayLengthMm = decayLength;
-  figures.lateralSigmaMm = lateralSigma;
-  for (std::size_t i = 0; i < N; ++i) {
+/// Rician noise, drawn in voxel order from the seeded generator.
+void addRicianNoise(double noiseFraction, std::mt19937_64& rng, ScalarImage* image)
+{
+  float* intraop = image->GetBufferPointer();
+  std::normal_distribution<double> gauss(0.0, noiseFraction * 1000.0);
+  for (std::size_t i = 0, n = image->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) {
+    const double real = intraop[i] + gauss(rng), imaginary = gauss(rng);
+    intraop[i] = float(std::round(std::sqrt(real * real + imaginary * imaginary)));
+  }
+}
+
+/// Whether the intraoperative grid holds the point x' of the deformed configuration once moved,
+/// at least `marginMm` from its edges.
+bool insideIntraopView(const Grid& I, const Euler& motion, const Vec3& xPrime, double marginMm)
+{
+  const Vec3 c = I.continuousIndex(toVec(motion.TransformPoint(toPoint(xPrime))));
+  for (int k = 0; k < 3; ++k) {
+    const double margin = marginMm / I.spacing[k];
+    if (c[k] < margin || c[k] > double(I.size[k] - 1) - margin) return false;
+  }
+  return true;
+}
+
+/// The volumes and displacements of case.json: the tumour, ventricles, brain, gap and cavity, the
+/// brain the intraoperative grid sees and the largest displacement of the deformed brain.
+void measureVolumes(const Anatomy& a, const SimulatedCase& result, const DeformedConfiguration& deformed,
+                    const Subsidence& subsidence, const Euler& motion, const Grid& I, CaseFigures& figures)
+{
+  const Grid& G = a.G;
+  const double voxelMl = a.voxelMl;
+  const LabelPixel* labels = result.preopLabels->GetBufferPointer();
+  const LabelPixel* dLabels = deformed.labels->GetBufferPointer();
+  const unsigned char* brain = a.brain();
+  for (std::size_t i = 0; i < a.N; ++i) {
     if (labels[i] == Tumour) figures.tumourVolumeMl += voxelMl;
     if (labels[i] == Ventricles) figures.ventricleVolumeMl += voxelMl;
     if (labels[i] >= Parenchyma) figures.brainVolumeMl += voxelMl;
     if (brain[i] && dLabels[i] == Background) {
-      const Vec3 source = G.pointOf(i) + sampleField(W, w, G.pointOf(i));
+      const Vec3 source = G.pointOf(i) + subsidence.at(G.pointOf(i));
       if (sampleNearest<LabelPixel>(G, labels, source, Background) == Tumour) figures.cavityVolumeMl += voxelMl;
       else figures.gapVolumeMl += voxelMl;
     }
     if (dLabels[i] >= Parenchyma) {
-      const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(G.pointOf(i)))));
+      const Vec3 c = I.continuousIndex(toVec(motion.TransformPoint(toPoint(G.pointOf(i)))));
       bool inView = true;
       for (int k = 0; k < 3; ++k) inView = inView && c[k] >= -0.5 && c[k] <= double(I.size[k]) - 0.5;
       if (inView) figures.brainInFieldOfViewMl += voxelMl;
     }
-    if (dLabels[i] >= Parenchyma) figures.maxBrainDisplacementMm = std::max(figures.maxBrainDisplacementMm, norm(sampleField(W, w, G.pointOf(i))));
+    if (dLabels[i] >= Parenchyma) figures.maxBrainDisplacementMm = std::max(figures.maxBrainDisplacementMm, norm(subsidence.at(G.pointOf(i))));
   }
-  figures.minJacobianDeterminant = 1.0;
+}
+
+/// The smallest Jacobian determinant of x' -> x' + w(x') at the subsidence grid's inner nodes in
+/// the brain; 1 at most.
+double minimumJacobianDeterminant(const Subsidence& subsidence, const Anatomy& a)
+{
+  const Grid& W = subsidence.W;
+  const itk::Vector<double, 3>* w = subsidence.w();
+  double minimum = 1.0;
   for (std::size_t k = 1; k + 1 < W.size[2]; ++k) {
     for (std::size_t j = 1; j + 1 < W.size[1]; ++j) {
       for (std::size_t i = 1; i + 1 < W.size[0]; ++i) {
         const Vec3 p = W.point(double(i), double(j), double(k));
-        if (!sampleNearest<unsigned char>(G, brain, p, 0)) continue;
+        if (!sampleNearest<unsigned char>(a.G, a.brain(), p, 0)) continue;
         // J = I + grad w, by central differences along the grid axes (the grid is axis-aligned
         // with the preoperative image, whose direction is a signed permutation here).
         double J[3][3];
@@ -1194,82 +1408,132 @@ SimulatedCase simulateCase(const CaseParameters& P)
         }
         const double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
                            J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-        figures.minJacobianDeterminant = std::min(figures.minJacobianDeterminant, det);
+        minimum = std::min(minimum, det);
       }
     }
   }
+  return minimum;
+}
 
-  // -- Landmarks, chosen in the deformed configuration x' (voxel centres), seen at y = M(x').
-  {
-    auto deformedBrainMask = newImage<MaskImage>(G, 0);
-    auto cavityMask = newImage<MaskImage>(G, 0);
-    for (std::size_t i = 0; i < N; ++i) {
-      deformedBrainMask->GetBufferPointer()[i] = dLabels[i] >= Parenchyma;
-      cavityMask->GetBufferPointer()[i] = brain[i] && dLabels[i] == Background && labels[i] != Head &&
-                                          sampleNearest<LabelPixel>(G, labels, G.pointOf(i) + sampleField(W, w, G.pointOf(i)), 0) == Tumour;
-    }
-    ScalarImage::Pointer tissueDepth = signedDistanceMm(deformedBrainMask);
-    ScalarImage::Pointer cavityDistance = signedDistanceMm(cavityMask);
-    const bool hasCavity = figures.cavityVolumeMl > 0;
-    // A tumour left in place: its margin, both sides of its boundary, is where the surgeon looks.
-    auto tumourMask = newImage<MaskImage>(G, 0);
-    bool hasTumour = false;
-    for (std::size_t i = 0; i < N; ++i) {
-      tumourMask->GetBufferPointer()[i] = dLabels[i] == Tumour;
-      hasTumour = hasTumour || dLabels[i] == Tumour;
-    }
-    ScalarImage::Pointer tumourDistance = hasTumour ? signedDistanceMm(tumourMask) : nullptr;
-    auto insideIntraopView = [&](const Vec3& xPrime) {
-      const Vec3 c = I.continuousIndex(toVec(motion->TransformPoint(toPoint(xPrime))));
-      for (int k = 0; k < 3; ++k) {
-        const double margin = 8.0 / I.spacing[k];
-        if (c[k] < margin || c[k] > double(I.size[k] - 1) - margin) return false;
-      }
-      return true;
-    };
-    std::vector<Vec3> craniotomyCandidates, cavityCandidates, marginCandidates, brainCandidates, headCandidates;
-    for (std::size_t i = 0; i < N; ++i) {
-      const LabelPixel l = dLabels[i];
-      const Vec3 p = G.pointOf(i);
-      if (l >= Parenchyma && tissueDepth->GetBufferPointer()[i] <= -3.0f) {
-        if (!insideIntraopView(p)) continue;
-        const Vec3 d = p - craniotomyCentre;
-        const double along = dot(d, axis);
-        const double r = std::sqrt(std::max(dot(d, d) - along * along, 0.0));
-        if (hasCavity && cavityDistance->GetBufferPointer()[i] <= 10.0f) cavityCandidates.push_back(p);
-        else if (tumourDistance && std::abs(tumourDistance->GetBufferPointer()[i]) <= 8.0f) marginCandidates.push_back(p);
-        else if (r < lateralSigma && -along < 35.0) craniotomyCandidates.push_back(p);
-        else brainCandidates.push_back(p);
-      } else if (l == Head && norm(sampleField(W, w, p)) < 0.01 && insideIntraopView(p)) {
-        headCandidates.push_back(p);
-      }
-    }
-    std::vector<Vec3> taken;
-    const double separation = small ? 10.0 : 8.0;
-    const auto craniotomyPoints = pickSeparated(craniotomyCandidates, 10, separation, taken, rng);
-    const auto cavityPoints = pickSeparated(cavityCandidates, hasCavity ? 6 : 0, 6.0, taken, rng);
-    const auto marginPoints = pickSeparated(marginCandidates, 6, 6.0, taken, rng);
-    const auto brainPoints = pickSeparated(brainCandidates, 20, 15.0, taken, rng);
-    const auto headPoints = pickSeparated(headCandidates, 10, 25.0, taken, rng);
-    auto add = [&](const std::vector<Vec3>& points, const std::string& prefix, bool moves) {
-      int number = 1;
-      for (const Vec3& xPrime : points) {
-        LandmarkPair pair;
-        char name[64];
-        std::snprintf(name, sizeof(name), "%s-%02d", prefix.c_str(), number++);
-        pair.name = name;
-        pair.intraop = motion->TransformPoint(toPoint(xPrime));
-        // Brain tissue came from x' + w(x'); the head did not move.
-        pair.preop = moves ? result.intraopToPreop->TransformPoint(pair.intraop) : toPoint(xPrime);
-        result.landmarks.push_back(pair);
-      }
-    };
-    add(craniotomyPoints, "craniotomy", true);
-    add(cavityPoints, "near-cavity", true);
-    add(marginPoints, "tumour-margin", true);
-    add(brainPoints, "brain", true);
-    add(headPoints, "head", false);
+/// The voxel centres x' of the deformed configuration where landmarks may go, by region.
+struct LandmarkCandidates {
+  std::vector<Vec3> craniotomy, cavity, margin, brain, head;
+};
+
+/// Deformed brain at least 3 mm deep and inside the intraoperative view (8 mm from its edges): near
+/// the cavity (10 mm), at a tumour's margin (8 mm either side: where the surgeon looks), under the
+/// craniotomy, or elsewhere; and head that did not move.
+LandmarkCandidates landmarkCandidates(const Anatomy& a, const Surgery& s, const SimulatedCase& result,
+                                      const DeformedConfiguration& deformed, const Subsidence& subsidence, const Euler& motion,
+                                      const Grid& I)
+{
+  const Grid& G = a.G;
+  const LabelPixel* labels = result.preopLabels->GetBufferPointer();
+  const LabelPixel* dLabels = deformed.labels->GetBufferPointer();
+  const unsigned char* brain = a.brain();
+  auto deformedBrainMask = newImage<MaskImage>(G, 0);
+  auto cavityMask = newImage<MaskImage>(G, 0);
+  auto tumourMask = newImage<MaskImage>(G, 0);
+  bool hasTumour = false;
+  for (std::size_t i = 0; i < a.N; ++i) {
+    deformedBrainMask->GetBufferPointer()[i] = dLabels[i] >= Parenchyma;
+    cavityMask->GetBufferPointer()[i] = brain[i] && dLabels[i] == Background && labels[i] != Head &&
+                                        sampleNearest<LabelPixel>(G, labels, G.pointOf(i) + subsidence.at(G.pointOf(i)), 0) == Tumour;
+    tumourMask->GetBufferPointer()[i] = dLabels[i] == Tumour;
+    hasTumour = hasTumour || dLabels[i] == Tumour;
   }
+  ScalarImage::Pointer tissueDepth = signedDistanceMm(deformedBrainMask);
+  ScalarImage::Pointer cavityDistance = signedDistanceMm(cavityMask);
+  const bool hasCavity = result.figures.cavityVolumeMl > 0;
+  ScalarImage::Pointer tumourDistance = hasTumour ? signedDistanceMm(tumourMask) : nullptr;
+  LandmarkCandidates candidates;
+  for (std::size_t i = 0; i < a.N; ++i) {
+    const LabelPixel l = dLabels[i];
+    const Vec3 p = G.pointOf(i);
+    if (l >= Parenchyma && tissueDepth->GetBufferPointer()[i] <= -3.0f) {
+      if (!insideIntraopView(I, motion, p, 8.0)) continue;
+      const Vec3 d = p - s.craniotomyCentre;
+      const double along = dot(d, s.axis);
+      const double r = std::sqrt(std::max(dot(d, d) - along * along, 0.0));
+      if (hasCavity && cavityDistance->GetBufferPointer()[i] <= 10.0f) candidates.cavity.push_back(p);
+      else if (tumourDistance && std::abs(tumourDistance->GetBufferPointer()[i]) <= 8.0f) candidates.margin.push_back(p);
+      else if (r < s.lateralSigma && -along < 35.0) candidates.craniotomy.push_back(p);
+      else candidates.brain.push_back(p);
+    } else if (l == Head && norm(subsidence.at(p)) < 0.01 && insideIntraopView(I, motion, p, 8.0)) {
+      candidates.head.push_back(p);
+    }
+  }
+  return candidates;
+}
+
+/// Landmarks, chosen in the deformed configuration x' (voxel centres), seen at y = M(x'), apart
+/// from each other, in random (seeded) order.
+void chooseLandmarks(const LandmarkCandidates& candidates, bool small, const Euler& motion, std::mt19937_64& rng,
+                     SimulatedCase& result)
+{
+  const bool hasCavity = result.figures.cavityVolumeMl > 0;
+  std::vector<Vec3> taken;
+  const double separation = small ? 10.0 : 8.0;
+  const auto craniotomyPoints = pickSeparated(candidates.craniotomy, 10, separation, taken, rng);
+  const auto cavityPoints = pickSeparated(candidates.cavity, hasCavity ? 6 : 0, 6.0, taken, rng);
+  const auto marginPoints = pickSeparated(candidates.margin, 6, 6.0, taken, rng);
+  const auto brainPoints = pickSeparated(candidates.brain, 20, 15.0, taken, rng);
+  const auto headPoints = pickSeparated(candidates.head, 10, 25.0, taken, rng);
+  auto add = [&](const std::vector<Vec3>& points, const std::string& prefix, bool moves) {
+    int number = 1;
+    for (const Vec3& xPrime : points) {
+      LandmarkPair pair;
+      char name[64];
+      std::snprintf(name, sizeof(name), "%s-%02d", prefix.c_str(), number++);
+      pair.name = name;
+      pair.intraop = motion.TransformPoint(toPoint(xPrime));
+      // Brain tissue came from x' + w(x'); the head did not move.
+      pair.preop = moves ? result.intraopToPreop->TransformPoint(pair.intraop) : toPoint(xPrime);
+      result.landmarks.push_back(pair);
+    }
+  };
+  add(craniotomyPoints, "craniotomy", true);
+  add(cavityPoints, "near-cavity", true);
+  add(marginPoints, "tumour-margin", true);
+  add(brainPoints, "brain", true);
+  add(headPoints, "head", false);
+}
+
+} // namespace
+
+SimulatedCase simulateCase(const CaseParameters& P)
+{
+  P.validate();
+  const bool small = P.size == CaseSize::Small;
+  const Anatomy anatomy = preoperativeAnatomy(P, small);
+  std::mt19937_64 rng(P.seed);
+  SimulatedCase result;
+  CaseFigures& figures = result.figures;
+
+  // The preoperative case; then the truth of the shift and the deformed configuration x'.
+  const Surgery surgery = plannedSurgery(P, anatomy, rng);
+  paintPreoperativeCase(P, anatomy, surgery.tumour, result);
+  result.preopFmri = simulatedFmri(anatomy, surgery.axis, rng);
+  const Subsidence subsidence = trueSubsidence(P, small, anatomy.G, surgery, *result.preopLabels, figures);
+  const DeformedConfiguration deformed = deformedConfiguration(P, anatomy, surgery, subsidence, result);
+
+  // The patient in the scanner: intraop point y = M(x'); the truth maps y back.
+  const Euler::Pointer motion = patientMotion(P, anatomy);
+  const Euler::Pointer rigid = setTruthTransforms(*motion, subsidence, result);
+  const Grid I = intraoperativeGrid(P, small, *motion, anatomy, surgery);
+  scanIntraoperative(P, anatomy, deformed, *rigid, I, rng, result);
+  addRicianNoise(P.noiseFraction, rng, result.intraopImage);
+
+  figures.craniotomyCentre = toPoint(surgery.craniotomyCentre);
+  figures.craniotomyAxis = surgery.axis;
+  figures.tumourCentre = toPoint(surgery.tumour.centre);
+  figures.decayLengthMm = surgery.decayLength;
+  figures.lateralSigmaMm = surgery.lateralSigma;
+  measureVolumes(anatomy, result, deformed, subsidence, *motion, I, figures);
+  figures.minJacobianDeterminant = minimumJacobianDeterminant(subsidence, anatomy);
+
+  const LandmarkCandidates candidates = landmarkCandidates(anatomy, surgery, result, deformed, subsidence, *motion, I);
+  chooseLandmarks(candidates, small, *motion, rng, result);
   return result;
 }
 

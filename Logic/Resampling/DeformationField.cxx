@@ -72,12 +72,31 @@ ScalarImage::Pointer gaussian(const ScalarImage::Pointer& image, double sigmaMm)
   out->DisconnectPipeline();
   return out;
 }
-} // namespace
 
-DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTransform& rigid, const ImageGeometry& grid,
-                                     const DeformationFieldParameters& parameters, const std::string& meshName)
+/// The intraoperative grid's voxel counts along i, j and k, and a voxel's place in the buffers.
+struct VoxelLattice {
+  long nx, ny, nz;
+  explicit VoxelLattice(const ImageGeometry& grid) : nx(long(grid.size[0])), ny(long(grid.size[1])), nz(long(grid.size[2])) {}
+  std::size_t offset(long i, long j, long k) const { return std::size_t(i + nx * (j + ny * k)); }
+};
+
+/// The non-rigid correction w = X - p of each intraoperative voxel (model frame, three floats a
+/// voxel), and whether the deformed mesh holds the voxel (elsewhere w is the fade).
+struct VoxelCorrection {
+  std::vector<float> w;
+  std::vector<unsigned char> located;
+  std::size_t invertedDeformedTetrahedra = 0;
+};
+
+/// The mesh's nodes: X in the preoperative (model) frame, and X + u in the intraoperative grid's
+/// index space, where the deformed tetrahedra are rasterised.
+struct MeshNodes {
+  std::vector<Vec> undeformed, deformedIndex;
+};
+
+void checkFieldInputs(vtkDataArray* displacement, const SpatialTransform& rigid, const DeformationFieldParameters& parameters,
+                      const std::string& meshName)
 {
-  vtkDataArray* displacement = mesh->GetPointData()->GetArray("Displacement");
   if (!displacement || displacement->GetNumberOfComponents() != 3) {
     throw InputError(meshName + ": no point array \"Displacement\"; run `brainshift simulate` on this output folder first");
   }
@@ -85,193 +104,259 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   if (!(parameters.fallbackSigmaMm > 0) || parameters.fallbackSigmaMm > 100) {
     throw InputError("warp: the fallback width must be within 0 to 100 mm");
   }
-  DeformationField result;
-  const GridMaps maps = gridMapsOf(rigid, grid);
-  const long nx = long(grid.size[0]), ny = long(grid.size[1]), nz = long(grid.size[2]);
-  const std::size_t voxels = grid.numberOfVoxels();
-  result.voxels = voxels;
+}
 
-  // -- Locate every voxel's model-frame point in the deformed mesh: rasterise each deformed
-  //    tetrahedron over the voxels of its box (index space is an affine image of the model frame,
-  //    so barycentric coordinates carry over).
-  const auto locateStart = std::chrono::steady_clock::now();
+MeshNodes meshNodesOf(vtkUnstructuredGrid* mesh, vtkDataArray* displacement, const GridMaps& maps, const std::string& meshName)
+{
   const vtkIdType nodes = mesh->GetNumberOfPoints();
-  const std::size_t nodeCount = std::size_t(nodes);
-  std::vector<Vec> undeformed(nodeCount), deformedIndex(nodeCount);
+  MeshNodes result;
+  result.undeformed.resize(std::size_t(nodes));
+  result.deformedIndex.resize(std::size_t(nodes));
   for (vtkIdType i = 0; i < nodes; ++i) {
     Vec x, u;
     mesh->GetPoint(i, x.data());
     displacement->GetTuple(i, u.data());
     if (!u.allFinite()) throw InputError(meshName + ": the displacement of node " + std::to_string(i) + " is not finite");
-    undeformed[std::size_t(i)] = x;
-    deformedIndex[std::size_t(i)] = maps.modelToIndex * (x + u) + maps.modelToIndexOffset;
+    result.undeformed[std::size_t(i)] = x;
+    result.deformedIndex[std::size_t(i)] = maps.modelToIndex * (x + u) + maps.modelToIndexOffset;
   }
-  std::vector<float> correction(3 * voxels, 0.0f); // X - p, model frame
-  std::vector<unsigned char> located(voxels, 0);
+  return result;
+}
+
+/// Gives each voxel of the deformed tetrahedron `v` (not yet located) its correction, from the
+/// barycentric coordinates of its index in the deformed tetrahedron. Index space is an affine image
+/// of the model frame, so barycentric coordinates carry over.
+void rasteriseDeformedTetrahedron(const vtkIdType v[4], const MeshNodes& nodes, vtkDataArray* displacement,
+                                  const VoxelLattice& lattice, VoxelCorrection& out)
+{
+  const Vec& q0 = nodes.deformedIndex[std::size_t(v[0])];
+  Mat edges;
+  edges.col(0) = nodes.deformedIndex[std::size_t(v[1])] - q0;
+  edges.col(1) = nodes.deformedIndex[std::size_t(v[2])] - q0;
+  edges.col(2) = nodes.deformedIndex[std::size_t(v[3])] - q0;
+  const double det = edges.determinant();
+  const Mat undeformedEdges = [&] {
+    Mat m;
+    for (int k = 0; k < 3; ++k) m.col(k) = nodes.undeformed[std::size_t(v[k + 1])] - nodes.undeformed[std::size_t(v[0])];
+    return m;
+  }();
+  if (det * undeformedEdges.determinant() <= 0) ++out.invertedDeformedTetrahedra;
+  if (std::abs(det) < 1e-12) return;
+  const Mat inverse = edges.inverse();
+  Vec lo = q0, hi = q0;
+  for (int k = 1; k < 4; ++k) {
+    lo = lo.cwiseMin(nodes.deformedIndex[std::size_t(v[k])]);
+    hi = hi.cwiseMax(nodes.deformedIndex[std::size_t(v[k])]);
+  }
+  const long i0 = std::max(0L, long(std::ceil(lo[0]))), i1 = std::min(lattice.nx - 1, long(std::floor(hi[0])));
+  const long j0 = std::max(0L, long(std::ceil(lo[1]))), j1 = std::min(lattice.ny - 1, long(std::floor(hi[1])));
+  const long k0 = std::max(0L, long(std::ceil(lo[2]))), k1 = std::min(lattice.nz - 1, long(std::floor(hi[2])));
+  for (long k = k0; k <= k1; ++k) {
+    for (long j = j0; j <= j1; ++j) {
+      for (long i = i0; i <= i1; ++i) {
+        const std::size_t at = lattice.offset(i, j, k);
+        if (out.located[at]) continue;
+        const Vec lambda = inverse * (Vec(double(i), double(j), double(k)) - q0);
+        const double lambda0 = 1.0 - lambda.sum();
+        const double eps = -1e-9;
+        if (lambda[0] < eps || lambda[1] < eps || lambda[2] < eps || lambda0 < eps) continue;
+        out.located[at] = 1;
+        // X - p = -(sum lambda_k u_k): the preoperative point minus the deformed one.
+        Vec u0, u1, u2, u3;
+        displacement->GetTuple(v[0], u0.data());
+        displacement->GetTuple(v[1], u1.data());
+        displacement->GetTuple(v[2], u2.data());
+        displacement->GetTuple(v[3], u3.data());
+        const Vec w = -(lambda0 * u0 + lambda[0] * u1 + lambda[1] * u2 + lambda[2] * u3);
+        for (int d = 0; d < 3; ++d) out.w[3 * at + std::size_t(d)] = float(w[d]);
+      }
+    }
+  }
+}
+
+/// Locates every voxel's model-frame point in the deformed mesh by rasterising each deformed
+/// tetrahedron over the voxels of its box; the first tetrahedron to hold a voxel gives its correction.
+VoxelCorrection correctionInsideDeformedMesh(vtkUnstructuredGrid* mesh, vtkDataArray* displacement, const GridMaps& maps,
+                                             const VoxelLattice& lattice, std::size_t voxels, const std::string& meshName)
+{
+  const MeshNodes nodes = meshNodesOf(mesh, displacement, maps, meshName);
+  VoxelCorrection result;
+  result.w.assign(3 * voxels, 0.0f);
+  result.located.assign(voxels, 0);
   vtkNew<vtkIdList> ids;
   for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
     mesh->GetCellPoints(c, ids);
     if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
     const vtkIdType v[4] = {ids->GetId(0), ids->GetId(1), ids->GetId(2), ids->GetId(3)};
-    const Vec& q0 = deformedIndex[std::size_t(v[0])];
-    Mat edges;
-    edges.col(0) = deformedIndex[std::size_t(v[1])] - q0;
-    edges.col(1) = deformedIndex[std::size_t(v[2])] - q0;
-    edges.col(2) = deformedIndex[std::size_t(v[3])] - q0;
-    const double det = edges.determinant();
-    const Mat undeformedEdges = [&] {
-      Mat m;
-      for (int k = 0; k < 3; ++k) m.col(k) = undeformed[std::size_t(v[k + 1])] - undeformed[std::size_t(v[0])];
-      return m;
-    }();
-    if (det * undeformedEdges.determinant() <= 0) ++result.invertedDeformedTetrahedra;
-    if (std::abs(det) < 1e-12) continue;
-    const Mat inverse = edges.inverse();
-    Vec lo = q0, hi = q0;
-    for (int k = 1; k < 4; ++k) {
-      lo = lo.cwiseMin(deformedIndex[std::size_t(v[k])]);
-      hi = hi.cwiseMax(deformedIndex[std::size_t(v[k])]);
-    }
-    const long i0 = std::max(0L, long(std::ceil(lo[0]))), i1 = std::min(nx - 1, long(std::floor(hi[0])));
-    const long j0 = std::max(0L, long(std::ceil(lo[1]))), j1 = std::min(ny - 1, long(std::floor(hi[1])));
-    const long k0 = std::max(0L, long(std::ceil(lo[2]))), k1 = std::min(nz - 1, long(std::floor(hi[2])));
-    for (long k = k0; k <= k1; ++k) {
-      for (long j = j0; j <= j1; ++j) {
-        for (long i = i0; i <= i1; ++i) {
-          const std::size_t at = std::size_t(i + nx * (j + ny * k));
-          if (located[at]) continue;
-          const Vec lambda = inverse * (Vec(double(i), double(j), double(k)) - q0);
-          const double lambda0 = 1.0 - lambda.sum();
-          const double eps = -1e-9;
-          if (lambda[0] < eps || lambda[1] < eps || lambda[2] < eps || lambda0 < eps) continue;
-          located[at] = 1;
-          // X - p = -(sum lambda_k u_k): the preoperative point minus the deformed one.
-          Vec u0, u1, u2, u3;
-          displacement->GetTuple(v[0], u0.data());
-          displacement->GetTuple(v[1], u1.data());
-          displacement->GetTuple(v[2], u2.data());
-          displacement->GetTuple(v[3], u3.data());
-          const Vec w = -(lambda0 * u0 + lambda[0] * u1 + lambda[1] * u2 + lambda[2] * u3);
-          for (int d = 0; d < 3; ++d) correction[3 * at + std::size_t(d)] = float(w[d]);
-        }
-      }
-    }
+    rasteriseDeformedTetrahedron(v, nodes, displacement, lattice, result);
   }
-  result.locateSeconds = secondsSince(locateStart);
+  return result;
+}
 
-  // -- Outside the mesh: the correction fades out, w = G*(w m) / G*m * min(1, 2 G*m). The
-  //    smoothed fields vary on the scale of sigma, so they are computed on a grid coarser by whole
-  //    factors (block means, spacing up to sigma / 2) and interpolated trilinearly: a sixth to a
-  //    hundredth of the voxels to smooth.
-  const auto fallbackStart = std::chrono::steady_clock::now();
-  result.meshVoxels = std::size_t(std::count(located.begin(), located.end(), 1));
-  double largestCorrection = 0;
-  for (std::size_t i = 0; i < voxels; ++i) {
-    if (!located[i]) continue;
-    const double w2 = double(correction[3 * i]) * correction[3 * i] + double(correction[3 * i + 1]) * correction[3 * i + 1] +
-                      double(correction[3 * i + 2]) * correction[3 * i + 2];
-    largestCorrection = std::max(largestCorrection, std::sqrt(w2));
+double largestCorrectionInMesh(const VoxelCorrection& correction)
+{
+  const std::vector<float>& w = correction.w;
+  double largest = 0;
+  for (std::size_t i = 0; i < correction.located.size(); ++i) {
+    if (!correction.located[i]) continue;
+    const double w2 = double(w[3 * i]) * w[3 * i] + double(w[3 * i + 1]) * w[3 * i + 1] + double(w[3 * i + 2]) * w[3 * i + 2];
+    largest = std::max(largest, std::sqrt(w2));
   }
-  const double sigma = std::max(parameters.fallbackSigmaMm, 1.2 * largestCorrection);
-  result.fallbackSigmaMm = sigma;
-  const long full[3] = {nx, ny, nz};
+  return largest;
+}
+
+/// The grid the fade is smoothed on: the intraoperative grid coarser by whole factors (blocks of
+/// voxels, spacing up to sigma / 2), each coarse voxel at its block's centre.
+struct CoarseBlocks {
   long factor[3], coarse[3];
-  ImageGeometry coarseGrid = grid;
+  ImageGeometry grid;
+  std::size_t blockOf(long i, long j, long k) const
+  {
+    return std::size_t(i / factor[0] + coarse[0] * (j / factor[1] + coarse[1] * (k / factor[2])));
+  }
+};
+
+CoarseBlocks coarseBlocksFor(const ImageGeometry& grid, const VoxelLattice& lattice, double sigma)
+{
+  CoarseBlocks blocks;
+  blocks.grid = grid;
+  const long full[3] = {lattice.nx, lattice.ny, lattice.nz};
   itk::ContinuousIndex<double, 3> firstBlockCentre;
   for (int d = 0; d < 3; ++d) {
-    factor[d] = std::max(1L, long(std::floor(sigma / (2.0 * grid.spacing[unsigned(d)]))));
-    factor[d] = std::max(1L, std::min(factor[d], full[d] / 4)); // the recursive Gaussian needs 4 voxels
-    coarse[d] = (full[d] + factor[d] - 1) / factor[d];
-    coarseGrid.size[unsigned(d)] = std::size_t(coarse[d]);
-    coarseGrid.spacing[unsigned(d)] = grid.spacing[unsigned(d)] * double(factor[d]);
-    firstBlockCentre[unsigned(d)] = 0.5 * double(factor[d] - 1);
+    long& factor = blocks.factor[d];
+    factor = std::max(1L, long(std::floor(sigma / (2.0 * grid.spacing[unsigned(d)]))));
+    factor = std::max(1L, std::min(factor, full[d] / 4)); // the recursive Gaussian needs 4 voxels
+    blocks.coarse[d] = (full[d] + factor - 1) / factor;
+    blocks.grid.size[unsigned(d)] = std::size_t(blocks.coarse[d]);
+    blocks.grid.spacing[unsigned(d)] = grid.spacing[unsigned(d)] * double(factor);
+    firstBlockCentre[unsigned(d)] = 0.5 * double(factor - 1);
   }
   for (unsigned r = 0; r < 3; ++r) { // origin + direction (spacing * index)
-    coarseGrid.origin[r] = grid.origin[r];
-    for (unsigned c = 0; c < 3; ++c) coarseGrid.origin[r] += grid.direction[r][c] * grid.spacing[c] * firstBlockCentre[c];
+    blocks.grid.origin[r] = grid.origin[r];
+    for (unsigned c = 0; c < 3; ++c) blocks.grid.origin[r] += grid.direction[r][c] * grid.spacing[c] * firstBlockCentre[c];
   }
-  const std::size_t coarseVoxels = coarseGrid.numberOfVoxels();
-  // Channel 0: the mask m; 1 to 3: w m. Block means.
+  return blocks;
+}
+
+/// The four channels of the fade, block means smoothed by the Gaussian of width `sigma`: channel 0
+/// the mask m of the located voxels, 1 to 3 the correction times the mask, w m.
+std::array<ScalarImage::Pointer, 4> smoothedMaskAndCorrection(const VoxelCorrection& correction, const VoxelLattice& lattice,
+                                                              const CoarseBlocks& blocks, double sigma)
+{
+  const std::size_t coarseVoxels = blocks.grid.numberOfVoxels();
   std::array<ScalarImage::Pointer, 4> channels;
   for (auto& c : channels) {
-    c = coarseGrid.allocate<ScalarImage>();
+    c = blocks.grid.allocate<ScalarImage>();
     c->FillBuffer(0.0f);
   }
   std::vector<float> blockCount(coarseVoxels, 0.0f);
-  for (long k = 0; k < nz; ++k) {
-    for (long j = 0; j < ny; ++j) {
-      for (long i = 0; i < nx; ++i) {
-        const std::size_t at = std::size_t(i + nx * (j + ny * k));
-        const std::size_t block = std::size_t(i / factor[0] + coarse[0] * (j / factor[1] + coarse[1] * (k / factor[2])));
+  for (long k = 0; k < lattice.nz; ++k) {
+    for (long j = 0; j < lattice.ny; ++j) {
+      for (long i = 0; i < lattice.nx; ++i) {
+        const std::size_t at = lattice.offset(i, j, k);
+        const std::size_t block = blocks.blockOf(i, j, k);
         blockCount[block] += 1.0f;
-        if (!located[at]) continue;
+        if (!correction.located[at]) continue;
         channels[0]->GetBufferPointer()[block] += 1.0f;
-        for (int d = 0; d < 3; ++d) channels[std::size_t(d + 1)]->GetBufferPointer()[block] += correction[3 * at + std::size_t(d)];
+        for (int d = 0; d < 3; ++d) channels[std::size_t(d + 1)]->GetBufferPointer()[block] += correction.w[3 * at + std::size_t(d)];
       }
     }
   }
-  std::array<const float*, 4> smoothed{};
-  std::array<ScalarImage::Pointer, 4> smoothedImages;
+  std::array<ScalarImage::Pointer, 4> smoothed;
   for (std::size_t c = 0; c < 4; ++c) {
     float* v = channels[c]->GetBufferPointer();
     for (std::size_t b = 0; b < coarseVoxels; ++b) v[b] /= blockCount[b];
-    smoothedImages[c] = gaussian(channels[c], sigma);
-    smoothed[c] = smoothedImages[c]->GetBufferPointer();
+    smoothed[c] = gaussian(channels[c], sigma);
   }
-  for (long k = 0; k < nz; ++k) {
-    for (long j = 0; j < ny; ++j) {
-      for (long i = 0; i < nx; ++i) {
-        const std::size_t at = std::size_t(i + nx * (j + ny * k));
-        if (located[at]) continue;
-        // Trilinear weights on the coarse grid (clamped at its border).
-        const long index[3] = {i, j, k};
-        long lo[3];
-        double t[3];
-        for (int d = 0; d < 3; ++d) {
-          const double c = std::clamp((double(index[d]) - 0.5 * double(factor[d] - 1)) / double(factor[d]), 0.0, double(coarse[d] - 1));
-          lo[d] = std::min(long(c), coarse[d] - 2 >= 0 ? coarse[d] - 2 : 0);
-          t[d] = c - double(lo[d]);
-        }
-        double value[4] = {0, 0, 0, 0};
-        for (int corner = 0; corner < 8; ++corner) {
-          double weight = 1;
-          long q[3];
-          for (int d = 0; d < 3; ++d) {
-            const int up = (corner >> d) & 1;
-            q[d] = std::min(lo[d] + up, coarse[d] - 1);
-            weight *= up ? t[d] : 1.0 - t[d];
-          }
-          if (weight == 0) continue;
-          const std::size_t b = std::size_t(q[0] + coarse[0] * (q[1] + coarse[1] * q[2]));
-          for (std::size_t c = 0; c < 4; ++c) value[c] += weight * double(smoothed[c][b]);
-        }
+  return smoothed;
+}
+
+/// The four smoothed channels at voxel (i, j, k) of the full grid: trilinear weights on the coarse
+/// grid (clamped at its border).
+std::array<double, 4> interpolateChannels(const std::array<const float*, 4>& smoothed, const CoarseBlocks& blocks, long i,
+                                          long j, long k)
+{
+  const long index[3] = {i, j, k};
+  long lo[3];
+  double t[3];
+  for (int d = 0; d < 3; ++d) {
+    const long factor = blocks.factor[d], coarse = blocks.coarse[d];
+    const double c = std::clamp((double(index[d]) - 0.5 * double(factor - 1)) / double(factor), 0.0, double(coarse - 1));
+    lo[d] = std::min(long(c), coarse - 2 >= 0 ? coarse - 2 : 0);
+    t[d] = c - double(lo[d]);
+  }
+  std::array<double, 4> value{0, 0, 0, 0};
+  for (int corner = 0; corner < 8; ++corner) {
+    double weight = 1;
+    long q[3];
+    for (int d = 0; d < 3; ++d) {
+      const int up = (corner >> d) & 1;
+      q[d] = std::min(lo[d] + up, blocks.coarse[d] - 1);
+      weight *= up ? t[d] : 1.0 - t[d];
+    }
+    if (weight == 0) continue;
+    const std::size_t b = std::size_t(q[0] + blocks.coarse[0] * (q[1] + blocks.coarse[1] * q[2]));
+    for (std::size_t c = 0; c < 4; ++c) value[c] += weight * double(smoothed[c][b]);
+  }
+  return value;
+}
+
+/// Outside the mesh the correction fades out, w = G*(w m) / G*m * min(1, 2 G*m). The smoothed
+/// fields vary on the scale of sigma, so they are computed on a coarser grid and interpolated
+/// trilinearly: a sixth to a hundredth of the voxels to smooth. Returns sigma, the fade's width.
+double fadeCorrectionOutsideMesh(VoxelCorrection& correction, const ImageGeometry& grid, const VoxelLattice& lattice,
+                                 double minimumSigmaMm)
+{
+  const double sigma = std::max(minimumSigmaMm, 1.2 * largestCorrectionInMesh(correction));
+  const CoarseBlocks blocks = coarseBlocksFor(grid, lattice, sigma);
+  const std::array<ScalarImage::Pointer, 4> smoothedImages = smoothedMaskAndCorrection(correction, lattice, blocks, sigma);
+  std::array<const float*, 4> smoothed{};
+  for (std::size_t c = 0; c < 4; ++c) smoothed[c] = smoothedImages[c]->GetBufferPointer();
+  for (long k = 0; k < lattice.nz; ++k) {
+    for (long j = 0; j < lattice.ny; ++j) {
+      for (long i = 0; i < lattice.nx; ++i) {
+        const std::size_t at = lattice.offset(i, j, k);
+        if (correction.located[at]) continue;
+        const std::array<double, 4> value = interpolateChannels(smoothed, blocks, i, j, k);
         const double m = value[0];
         for (int d = 0; d < 3; ++d) {
-          correction[3 * at + std::size_t(d)] = m > 1e-6 ? float(value[d + 1] / m * std::min(1.0, 2.0 * m)) : 0.0f;
+          correction.w[3 * at + std::size_t(d)] = m > 1e-6 ? float(value[d + 1] / m * std::min(1.0, 2.0 * m)) : 0.0f;
         }
       }
     }
   }
-  result.fallbackSeconds = secondsSince(fallbackStart);
+  return sigma;
+}
 
-  // -- The whole mapping: x = R(y) + w, d = x - y.
-  result.field = grid.allocate<DisplacementFieldImage>();
-  DisplacementVector* field = result.field->GetBufferPointer();
-  for (long k = 0; k < nz; ++k) {
-    for (long j = 0; j < ny; ++j) {
-      for (long i = 0; i < nx; ++i) {
-        const std::size_t at = std::size_t(i + nx * (j + ny * k));
+/// The whole mapping: x = R(y) + w, d = x - y; also the largest |w|.
+DisplacementFieldImage::Pointer rigidWithCorrectionField(const VoxelCorrection& correction, const GridMaps& maps,
+                                                         const ImageGeometry& grid, double& maximumNonRigidMm)
+{
+  const VoxelLattice lattice(grid);
+  DisplacementFieldImage::Pointer result = grid.allocate<DisplacementFieldImage>();
+  DisplacementVector* field = result->GetBufferPointer();
+  const std::vector<float>& correctionW = correction.w;
+  for (long k = 0; k < lattice.nz; ++k) {
+    for (long j = 0; j < lattice.ny; ++j) {
+      for (long i = 0; i < lattice.nx; ++i) {
+        const std::size_t at = lattice.offset(i, j, k);
         const Vec y = maps.indexToPhysical * Vec(double(i), double(j), double(k)) + maps.origin;
-        const Vec w(correction[3 * at], correction[3 * at + 1], correction[3 * at + 2]);
-        result.maximumNonRigidMm = std::max(result.maximumNonRigidMm, w.norm());
+        const Vec w(correctionW[3 * at], correctionW[3 * at + 1], correctionW[3 * at + 2]);
+        maximumNonRigidMm = std::max(maximumNonRigidMm, w.norm());
         const Vec x = maps.rigidMatrix * y + maps.rigidTranslation + w;
         for (int d = 0; d < 3; ++d) field[at][unsigned(d)] = float(x[d] - y[d]);
       }
     }
   }
+  return result;
+}
 
-  // -- Folding: det of the Jacobian of y -> x (central differences in index space, then physical).
-  const auto jacobianStart = std::chrono::steady_clock::now();
+/// Folding: det of the Jacobian of y -> x (central differences in index space, one-sided at the
+/// border, then physical) into result.jacobianDeterminant, with its minimum and the folded voxels.
+void measureFolding(const GridMaps& maps, const ImageGeometry& grid, DeformationField& result)
+{
+  const long nx = long(grid.size[0]), ny = long(grid.size[1]), nz = long(grid.size[2]);
+  const DisplacementVector* field = result.field->GetBufferPointer();
   result.jacobianDeterminant = grid.allocate<ScalarImage>();
   float* jacobian = result.jacobianDeterminant->GetBufferPointer();
   const Mat physicalToIndex = maps.indexToPhysical.inverse();
@@ -299,6 +384,33 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
       }
     }
   }
+}
+} // namespace
+
+DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTransform& rigid, const ImageGeometry& grid,
+                                     const DeformationFieldParameters& parameters, const std::string& meshName)
+{
+  vtkDataArray* displacement = mesh->GetPointData()->GetArray("Displacement");
+  checkFieldInputs(displacement, rigid, parameters, meshName);
+  DeformationField result;
+  const GridMaps maps = gridMapsOf(rigid, grid);
+  const VoxelLattice lattice(grid);
+  result.voxels = grid.numberOfVoxels();
+
+  const auto locateStart = std::chrono::steady_clock::now();
+  VoxelCorrection correction = correctionInsideDeformedMesh(mesh, displacement, maps, lattice, result.voxels, meshName);
+  result.invertedDeformedTetrahedra = correction.invertedDeformedTetrahedra;
+  result.locateSeconds = secondsSince(locateStart);
+
+  const auto fallbackStart = std::chrono::steady_clock::now();
+  result.meshVoxels = std::size_t(std::count(correction.located.begin(), correction.located.end(), 1));
+  result.fallbackSigmaMm = fadeCorrectionOutsideMesh(correction, grid, lattice, parameters.fallbackSigmaMm);
+  result.fallbackSeconds = secondsSince(fallbackStart);
+
+  result.field = rigidWithCorrectionField(correction, maps, grid, result.maximumNonRigidMm);
+
+  const auto jacobianStart = std::chrono::steady_clock::now();
+  measureFolding(maps, grid, result);
   result.jacobianSeconds = secondsSince(jacobianStart);
   return result;
 }
