@@ -823,6 +823,10 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     // the gap the brain sank away from lies inside the aligned brain, and the k-NN gives its
     // shallow part (within the spatial channels' saturation of the aligned surface) to the head,
     // so the brain-labelled rest of it is a sheet too thin to count as thick, and stays brain.
+    // Not where the fluid is brighter than the parenchyma (T2): there what the k-NN gives to the
+    // head inside the aligned brain is mostly bright cortex (partial volume with its CSF), and
+    // counted as fluid it made thick bodies of the cortex (rf10-t2: 16 ml of parenchyma lost).
+    const bool alignedBrainToo = P.fluidThicknessInAlignedBrain && !contrast.fluidBrighterThanParenchyma();
     const std::vector<std::size_t> brainSlots = {slotOf(Parenchyma), slotOf(Ventricles), slotOf(Tumour)};
     auto inAlignedBrain = [&](std::size_t i) {
       for (std::size_t slot : brainSlots) {
@@ -831,7 +835,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
       return false;
     };
     for (std::size_t i = 0; i < N; ++i) {
-      const bool candidate = isBrain(out[i]) || (P.fluidThicknessInAlignedBrain && inAlignedBrain(i));
+      const bool candidate = isBrain(out[i]) || (alignedBrainToo && inAlignedBrain(i));
       const bool tumourTissue = tumourPresent && out[i] == Tumour &&
                                 !(P.tumourFluidByLook && tumourLooksLikeFluid(evidence, intensity[i]));
       fluid->GetBufferPointer()[i] = candidate && contrast.looksLikeFluidOrAir(intensity[i]) && !tumourTissue;

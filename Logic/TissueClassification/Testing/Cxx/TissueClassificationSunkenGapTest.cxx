@@ -6,7 +6,7 @@
 // brain-labelled rest of the gap is a sheet too thin to count, and the classification's boundary
 // stops millimetres short of the sunken brain (the surface's imposed displacements with it). The
 // tumour, decided in place in both (its cavity moved away from the rigid prior), keeps only what
-// does not look more like fluid than the tumour did before surgery.
+// does not look more like fluid than the tumour did before surgery. In T2 neither applies.
 #include "BrainShiftTestingSupport.h"
 #include "TissueClassificationTestSupport.h"
 
@@ -67,5 +67,26 @@ int TissueClassificationSunkenGapTest(int, char*[])
       BS_CHECK_MSG(scores[1].brain >= scores[0].brain - 1e-4, scores[1].brain << " against " << scores[0].brain);
       BS_CHECK_MSG(scores[1].surfaceMm <= scores[0].surfaceMm + 1e-3, scores[1].surfaceMm << " against " << scores[0].surfaceMm);
     }
+    // Where the fluid is brighter than the parenchyma (T2) the aligned brain is not used: the head
+    // the k-NN finds inside it is mostly bright cortex, and counted as fluid it carved parenchyma
+    // out of the brain. The labels are those of the k-NN's brain alone.
+    CaseParameters t2 = caseScenario("rf10-t2").parameters;
+    t2.size = CaseSize::Small;
+    testing::ClassifiedCase c{simulateCase(t2), nullptr};
+    c.rigid = registerRigidly(*c.simulated.intraopImage, *c.simulated.preopImage, c.simulated.preopLabels, {}).intraopToPreop;
+    TissueClassificationParameters p;
+    p.preopTumourContrast = preoperativeTumourContrast(*c.simulated.preopImage, *c.simulated.preopLabels);
+    const TissueClassificationResult withDefaults = classifyTissues(*c.simulated.intraopImage, *c.simulated.preopLabels, *c.rigid, std::nullopt, p);
+    BS_CHECK(withDefaults.contrast.fluidBrighterThanParenchyma());
+    p.fluidThicknessInAlignedBrain = p.tumourFluidByLook = false;
+    const TissueClassificationResult alone = classifyTissues(*c.simulated.intraopImage, *c.simulated.preopLabels, *c.rigid, std::nullopt, p);
+    const LabelPixel* a = withDefaults.labels->GetBufferPointer();
+    const LabelPixel* b = alone.labels->GetBufferPointer();
+    std::size_t differing = 0;
+    for (std::size_t i = 0, n = alone.labels->GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) differing += a[i] != b[i];
+    const double brainDice = testing::scoresOf(*withDefaults.labels, c.simulated, "T2, the defaults").brain;
+    std::cout << "T2: " << differing << " voxels differ from the k-NN's brain alone\n";
+    BS_CHECK_MSG(differing == 0, differing << " voxels differ");
+    BS_CHECK_MSG(brainDice > 0.95, brainDice);
   });
 }
