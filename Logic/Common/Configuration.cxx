@@ -121,7 +121,7 @@ Configuration Configuration::load(const fs::path& path)
     const json& c = document["classification"];
     if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
     requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
-                        "refinement_reach_mm"},
+                        "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look"},
                      file + ": classification");
     if (c.contains("tumour_resected")) {
       if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
@@ -147,6 +147,13 @@ Configuration Configuration::load(const fs::path& path)
     if (c.contains("bias_correction")) {
       if (!c["bias_correction"].is_boolean()) throw InputError(file + ": classification.bias_correction must be true or false");
       configuration.classificationBiasCorrection = c["bias_correction"].get<bool>();
+    }
+    for (const auto& [key, target] :
+         {std::pair<const char*, bool*>{"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
+          {"tumour_fluid_by_look", &configuration.classificationTumourFluidByLook}}) {
+      if (!c.contains(key)) continue;
+      if (!c[key].is_boolean()) throw InputError(file + ": classification." + key + " must be true or false");
+      *target = c[key].get<bool>();
     }
   }
   if (document.contains("rigid")) {

@@ -44,6 +44,10 @@ struct Configuration {
   unsigned classificationK = 7;
   double classificationSaturationMm = 10.0;
   bool classificationBiasCorrection = false;
+  /// Thick fluid in the brain (a gap, a cavity) measured over the aligned preoperative brain too.
+  bool classificationFluidThicknessInAlignedBrain = true;
+  /// A tumour in place: its k-NN voxels that look more like fluid than its own look may be fluid.
+  bool classificationTumourFluidByLook = true;
   /// "auto" (decided from the image where the aligned tumour lies), "yes" or "no".
   std::string classificationTumourResected = "auto";
   /// Passes of the classification that follows the brain (Warfield et al.'s adaptive template):

@@ -435,6 +435,21 @@ bool decideTumourResection(const TumourResectionEvidence& e, TumourResection tol
   return e.fluidLikeShare > e.tumourLikeShare;
 }
 
+/// A voxel nearer this scan's fluid or air than the tumour's own look before surgery (mapped onto
+/// this scan's fluid and parenchyma), as the resection vote counts it. Never where that look does
+/// not carry over (fluid brighter than the parenchyma: T2) or where the tumour looked like fluid
+/// before surgery (within 0.15 of the way to the parenchyma): there its tissue cannot be told from
+/// fluid, and it is kept.
+bool tumourLooksLikeFluid(const TumourResectionEvidence& e, double intensity)
+{
+  const double span = e.parenchymaMedian - e.fluidMedian;
+  if (!std::isfinite(span) || !(span > 1e-6) || !std::isfinite(e.preopRelative) || e.preopRelative < 0.15) return false;
+  const double expected = e.fluidMedian + e.preopRelative * span;
+  double toFluid = std::abs(intensity - e.fluidMedian);
+  if (std::isfinite(e.airMedian)) toFluid = std::min(toFluid, std::abs(intensity - e.airMedian));
+  return toFluid < std::abs(intensity - expected);
+}
+
 } // namespace
 
 std::string toString(TumourResection decision)
@@ -463,6 +478,8 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
   parameters.biasCorrection = configuration.classificationBiasCorrection;
   parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
   parameters.tumourResection = tumourResectionFromString(configuration.classificationTumourResected);
+  parameters.fluidThicknessInAlignedBrain = configuration.classificationFluidThicknessInAlignedBrain;
+  parameters.tumourFluidByLook = configuration.classificationTumourFluidByLook;
   return parameters;
 }
 
@@ -796,10 +813,32 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     fluid->CopyInformation(&intraop);
     fluid->SetRegions(intraop.GetLargestPossibleRegion());
     fluid->Allocate();
-    // A tumour that is still there is tissue, however dark its core.
+    // A tumour that is still there is tissue, however dark its core: what the k-NN calls tumour
+    // stays out of the fluid unless it looks more like fluid or air than the tumour did before
+    // surgery (tumourLooksLikeFluid): the fluid of a gap or a cavity the k-NN gave to a tumour
+    // wrongly kept (its cavity moved away from the rigid prior) is fluid.
     const bool tumourPresent = present.count(Tumour) && !result.tumourResected;
+    const TumourResectionEvidence& evidence = result.tumourEvidence;
+    // Its thickness is measured over what the k-NN or the aligned preoperative brain calls brain:
+    // the gap the brain sank away from lies inside the aligned brain, and the k-NN gives its
+    // shallow part (within the spatial channels' saturation of the aligned surface) to the head,
+    // so the brain-labelled rest of it is a sheet too thin to count as thick, and stays brain.
+    // Not where the fluid is brighter than the parenchyma (T2): there what the k-NN gives to the
+    // head inside the aligned brain is mostly bright cortex (partial volume with its CSF), and
+    // counted as fluid it made thick bodies of the cortex (rf10-t2: 16 ml of parenchyma lost).
+    const bool alignedBrainToo = P.fluidThicknessInAlignedBrain && !contrast.fluidBrighterThanParenchyma();
+    const std::vector<std::size_t> brainSlots = {slotOf(Parenchyma), slotOf(Ventricles), slotOf(Tumour)};
+    auto inAlignedBrain = [&](std::size_t i) {
+      for (std::size_t slot : brainSlots) {
+        if (slot < T && signedDistances[i * T + slot] <= 0.0f) return true;
+      }
+      return false;
+    };
     for (std::size_t i = 0; i < N; ++i) {
-      fluid->GetBufferPointer()[i] = isBrain(out[i]) && contrast.looksLikeFluidOrAir(intensity[i]) && !(tumourPresent && out[i] == Tumour);
+      const bool candidate = isBrain(out[i]) || (alignedBrainToo && inAlignedBrain(i));
+      const bool tumourTissue = tumourPresent && out[i] == Tumour &&
+                                !(P.tumourFluidByLook && tumourLooksLikeFluid(evidence, intensity[i]));
+      fluid->GetBufferPointer()[i] = candidate && contrast.looksLikeFluidOrAir(intensity[i]) && !tumourTissue;
     }
     ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
     auto core = MaskImage::New();
@@ -827,6 +866,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     }
     for (std::size_t i = 0; i < N; ++i) {
       if (component[i]) {
+        if (!isBrain(out[i])) continue; // the head's or background's own voxels keep their label
         const auto& o = overlap[component[i]];
         out[i] = double(o.first) >= 0.3 * double(o.second) ? Ventricles : Background;
       } else if (out[i] == Ventricles && signedDistances[i * T + ventricleSlot] > 0.5f * float(P.saturationMm)) {

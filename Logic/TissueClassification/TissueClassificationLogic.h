@@ -89,6 +89,15 @@ struct TissueClassificationParameters {
   double prototypeErosionMm = 3.0;     ///< automatic choice: this far inside the (aligned) tissue
   bool biasCorrection = false;         ///< N4 under a head mask before the intensity is used
   double fluidOpeningMm = 2.0;         ///< fluid thicker than this is a gap or a cavity, not a sulcus
+  /// The fluid's thickness is measured over what the k-NN calls brain and, besides, over the aligned
+  /// preoperative brain (true; not where the fluid is brighter than the parenchyma, T2); or over
+  /// what the k-NN calls brain alone (false: a gap whose shallow part the k-NN gave to the head is
+  /// left a thin sheet, and stays brain).
+  bool fluidThicknessInAlignedBrain = true;
+  /// A tumour decided in place: what the k-NN calls tumour but looks more like this scan's fluid or
+  /// air than the tumour did before surgery may be fluid (true); or all of it is tissue (false: the
+  /// gap's or cavity's fluid the k-NN gave to a tumour wrongly kept stays brain).
+  bool tumourFluidByLook = true;
   double smallHoleMl = 0.5;            ///< holes in the brain smaller than this are filled
   std::uint64_t seed = 2000;
   TumourResection tumourResection = TumourResection::Auto;

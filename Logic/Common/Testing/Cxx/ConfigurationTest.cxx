@@ -27,13 +27,16 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(shipped.rigidLevels == defaults.rigidLevels && defaults.rigidLevels == 3);
     BS_CHECK_NEAR(shipped.meshGrading, defaults.meshGrading, 0);
     BS_CHECK(shipped.meshCoarseningLevels == defaults.meshCoarseningLevels);
+    BS_CHECK(shipped.classificationFluidThicknessInAlignedBrain && defaults.classificationFluidThicknessInAlignedBrain);
+    BS_CHECK(shipped.classificationTumourFluidByLook && defaults.classificationTumourFluidByLook);
 
     const fs::path file = folder / "config.json";
     writeTextFileAtomically(file, R"({"materials": {"4": {"youngs_modulus_pa": 20000}},
                                       "mesh": {"resolution_mm": 2.5, "labels": [2, 3], "grading": 1.5, "coarsening_levels": 3,
                                                "region_of_interest": {"center_lps": [10, -20, 30.5], "radius_mm": 12}},
                                       "solver": {"options": "-ksp_type gmres -pc_type bjacobi"},
-                                      "rigid": {"sampling": 0.5, "levels": 2}})");
+                                      "rigid": {"sampling": 0.5, "levels": 2},
+                                      "classification": {"fluid_thickness_in_aligned_brain": false, "tumour_fluid_by_look": false}})");
     const Configuration c = Configuration::load(file);
     BS_CHECK_NEAR(c.materials.at(4).youngsModulusPa, 20000.0, 0);
     BS_CHECK_NEAR(c.materials.at(4).poissonRatio, 0.45, 0); // the rest of label 4 keeps its default
@@ -47,6 +50,7 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(c.solverOptions == "-ksp_type gmres -pc_type bjacobi");
     BS_CHECK_NEAR(c.rigidSamplingFraction, 0.5, 0);
     BS_CHECK(c.rigidLevels == 2);
+    BS_CHECK(!c.classificationFluidThicknessInAlignedBrain && !c.classificationTumourFluidByLook);
 
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
@@ -67,6 +71,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"rigid": {"levels": 4}})", "rigid levels");
     refused(R"({"rigid": {"sampling": 0}})", "rigid sampling");
     refused(R"({"rigid": {"pyramid": 2}})", "unknown key \"pyramid\"");
+    refused(R"({"classification": {"tumour_fluid_by_look": 1}})", "classification.tumour_fluid_by_look");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
