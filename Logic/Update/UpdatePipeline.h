@@ -64,12 +64,13 @@ struct SerialScanSession {
   std::optional<RegistrationInputs> preoperative; ///< preoperative image, labels, overlays
   std::shared_ptr<const PreoperativeTissueMaps> tissueMaps; ///< the classification's, of those labels
   std::shared_ptr<const PreparedRigidMoving> rigidMoving;   ///< the rigid registration's, of that image
-  std::unique_ptr<FiniteElementSession> worker;
-  int scans = 0; ///< scans registered so far
   /// The served worker outlives one scan's context: its progress goes through here (set by the
   /// simulate stage for its scan), and its cancellation is this flag (the session's Cancel).
+  /// Declared before the worker, so that they outlive it (its shutdown may still report).
   std::function<void(const std::string&)> solveProgress;
   std::atomic<bool> cancelRequested{false};
+  std::unique_ptr<FiniteElementSession> worker;
+  int scans = 0; ///< scans registered so far
 };
 
 /// One run of stages on one case: its options, configuration and report, and its inputs, each read
