@@ -171,9 +171,11 @@ void runWatch(const WatchOptions& o)
   std::error_code ec;
   if (!o.watchFolder.empty() && !fs::is_directory(o.watchFolder, ec)) throw InputError(o.watchFolder.string() + ": --watch-dir is not a folder");
   IntraoperativeUpdateLogic session(o.run); // the configuration checked before anything is written
-  session.prepare(); // the folder claimed, the preoperative data read and checked once, before the first scan
+  session.claimSessionFolder();
+  // The navigation side may connect while the case is being prepared.
   std::unique_ptr<OpenIGTLinkServer> server;
   if (!o.igtlServer.empty()) server = startIgtlServer(o.igtlServer, o.run.outputDir / "received");
+  session.prepare(); // the preoperative data read and checked once, the mesh, the boundary, the worker: before the first scan
   ScanSource source(o, server.get());
   const auto extra = [&] { return server ? nlohmann::json{{"igtl_server", igtlServerSummary(*server)}} : nlohmann::json::object(); };
 

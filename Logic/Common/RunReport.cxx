@@ -37,11 +37,12 @@ void RunReport::setStage(const std::string& stage, const nlohmann::json& figures
 
 bool RunReport::hasStage(const std::string& stage) const
 {
-  return document_["stages"].contains(stage);
+  return document_.contains("stages") && document_["stages"].contains(stage);
 }
 
 const nlohmann::json& RunReport::stage(const std::string& stage) const
 {
+  if (!document_.contains("stages")) throw std::out_of_range("the report has no stage '" + stage + "'");
   return document_["stages"].at(stage);
 }
 

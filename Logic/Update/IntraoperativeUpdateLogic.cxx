@@ -60,8 +60,9 @@ IntraoperativeUpdateLogic::IntraoperativeUpdateLogic(RunOptions caseOptions)
 
 IntraoperativeUpdateLogic::~IntraoperativeUpdateLogic() = default;
 
-void IntraoperativeUpdateLogic::prepareOutputFolder()
+void IntraoperativeUpdateLogic::claimSessionFolder()
 {
+  if (folderClaimed_) return;
   const fs::path& folder = caseOptions_.outputDir;
   claimOutputFolder(folder); // before the earlier session's check: one session per folder
   std::error_code ec;
@@ -76,12 +77,13 @@ void IntraoperativeUpdateLogic::prepareOutputFolder()
     }
     fs::remove(summaryFile(), ec);
   }
+  folderClaimed_ = true;
 }
 
 void IntraoperativeUpdateLogic::prepare(const UpdateProgressCallback& progress)
 {
   if (prepared_) return;
-  prepareOutputFolder();
+  claimSessionFolder();
   RunOptions preparation = caseOptions_;
   preparation.outputDir = preparedFolder();
   std::error_code ec;

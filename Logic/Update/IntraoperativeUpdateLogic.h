@@ -77,6 +77,9 @@ public:
   /// `progress`. InputError for bad preoperative data, MethodError when the mesh or the worker
   /// fails. update() prepares when it was not done.
   void prepare(const UpdateProgressCallback& progress = {});
+  /// prepare()'s first step alone, for a front end that must own the folder before the data are
+  /// read (watch starts its OpenIGTLink server there): claimed once, later calls do nothing.
+  void claimSessionFolder();
   bool prepared() const { return prepared_; }
 
   /// Registers one scan into OUT/scan-NN/, reporting each stage and each stage's lines to
@@ -106,7 +109,6 @@ public:
   std::optional<std::filesystem::path> previousScanFolder() const { return previous_; }
 
 private:
-  void prepareOutputFolder();
   void registerScan(ScanUpdate& scan, const UpdateProgressCallback& progress);
 
   RunOptions caseOptions_;
@@ -115,6 +117,7 @@ private:
   std::optional<std::filesystem::path> previous_;
   std::vector<ScanUpdate> scans_;
   bool prepared_ = false;
+  bool folderClaimed_ = false;
 };
 
 } // namespace brainshift

@@ -13,6 +13,14 @@ int RunReportTest(int, char*[])
     const fs::path folder = testing::temporaryFolder("RunReportTest");
     const fs::path file = folder / "report.json";
     {
+      // A report without any stage (a run that failed on its input, or one just cleared) says so,
+      // and a stage asked for is an error, not undefined behaviour.
+      RunReport empty(folder / "empty.json");
+      empty.clear();
+      BS_CHECK(!empty.hasStage("surface"));
+      BS_CHECK_THROWS(empty.stage("surface"), std::out_of_range, "surface");
+    }
+    {
       RunReport report(file);
       report.setStage("rigid", {{"wall_seconds", 1.5}, {"metric_value", -0.61}, {"iterations", 40}});
       report.addWarning("a warning");
