@@ -4,22 +4,13 @@
 #include "BrainShiftErrors.h"
 #include "OutputFolder.h"
 #include "RunReport.h"
+#include "VolumeIO.h"
 
 #include <chrono>
 #include <cstdio>
 
 namespace brainshift {
 namespace fs = std::filesystem;
-
-bool isScanImageFile(const fs::path& path)
-{
-  const std::string name = path.filename().string();
-  for (const char* extension : {".nii", ".nii.gz", ".nrrd", ".nhdr", ".mha", ".mhd"}) {
-    const std::string e = extension;
-    if (name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0) return true;
-  }
-  return false;
-}
 
 ScanFolderWatcher::ScanFolderWatcher(fs::path folder)
   : folder_(std::move(folder))
@@ -33,7 +24,7 @@ std::optional<fs::path> ScanFolderWatcher::next()
   std::error_code ec;
   std::set<fs::path> candidates;
   for (const auto& entry : fs::directory_iterator(folder_, ec)) {
-    if (entry.is_regular_file(ec) && isScanImageFile(entry.path()) && !taken_.count(entry.path())) candidates.insert(entry.path());
+    if (entry.is_regular_file(ec) && isVolumePath(entry.path()) && !taken_.count(entry.path())) candidates.insert(entry.path());
   }
   for (const fs::path& file : candidates) { // name order
     const auto size = fs::file_size(file, ec);

@@ -23,9 +23,6 @@
 
 namespace brainshift {
 
-/// Whether a file name is an image a scan may come in (NIfTI, NRRD, MetaImage).
-bool isScanImageFile(const std::filesystem::path& path);
-
 /// The images a scanner writes into a folder, each taken once, in name order, once its size has
 /// stayed the same over one poll (the scanner may still be writing it).
 class ScanFolderWatcher {

@@ -23,6 +23,7 @@
 #include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
+#include "UpdateFocus.h"
 #include "UpdatePipeline.h"
 #include "TissueClassificationLogic.h"
 #include "TransformIO.h"
@@ -680,7 +681,7 @@ namespace {
 /// the brain surface coloured by its displacement under the rigid transform (the model frame).
 /// A rejected non-rigid update says so in the name of the transform that stands in for it.
 /// The confidence map's name in the scene.
-constexpr const char* UncertaintyMapName = "displacement uncertainty (mm)";
+constexpr const char* UncertaintyMapName = DisplacementUncertaintyNodeName;
 
 /// The confidence map on the scan: the solve's nodal "DisplacementUncertainty" rasterised in the
 /// model frame (2 mm) and brought onto the intraoperative grid by the update's own field; outside

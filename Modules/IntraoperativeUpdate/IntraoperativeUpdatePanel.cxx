@@ -2,8 +2,7 @@
 
 #include "Scene.h"
 #include "SceneIO.h"
-
-#include <itkImageRegionConstIteratorWithIndex.h>
+#include "UpdateFocus.h"
 
 #include <QApplication>
 #include <QCheckBox>
@@ -35,8 +34,6 @@ struct IntraoperativeUpdatePanel::ShownScan {
 };
 
 namespace {
-constexpr const char* UncertaintyName = "displacement uncertainty (mm)";
-
 /// Runs `call` on the GUI thread later, if the panel still exists then.
 template <typename Call>
 void onGuiThread(QPointer<IntraoperativeUpdatePanel> panel, Call call)
@@ -46,54 +43,6 @@ void onGuiThread(QPointer<IntraoperativeUpdatePanel> panel, Call call)
       if (panel) call(*panel);
     },
     Qt::QueuedConnection);
-}
-
-/// The voxel of the strongest |value| of `image`, as an LPS point.
-std::array<double, 3> strongestVoxel(const ScalarImage& image)
-{
-  itk::ImageRegionConstIteratorWithIndex<ScalarImage> it(&image, image.GetLargestPossibleRegion());
-  ScalarImage::IndexType best = image.GetLargestPossibleRegion().GetIndex();
-  float strongest = -1;
-  for (; !it.IsAtEnd(); ++it) {
-    const float magnitude = std::fabs(it.Get());
-    if (std::isfinite(magnitude) && magnitude > strongest) {
-      strongest = magnitude;
-      best = it.GetIndex();
-    }
-  }
-  ScalarImage::PointType point;
-  image.TransformIndexToPhysicalPoint(best, point);
-  return {point[0], point[1], point[2]};
-}
-
-/// The centroid of `label` in `labels`, as an LPS point; none when the label is absent.
-std::optional<std::array<double, 3>> labelCentroid(const LabelImage& labels, LabelPixel label)
-{
-  itk::ImageRegionConstIteratorWithIndex<LabelImage> it(&labels, labels.GetLargestPossibleRegion());
-  std::array<double, 3> sum{0, 0, 0};
-  std::size_t count = 0;
-  for (; !it.IsAtEnd(); ++it) {
-    if (it.Get() != label) continue;
-    LabelImage::PointType point;
-    labels.TransformIndexToPhysicalPoint(it.GetIndex(), point);
-    for (int d = 0; d < 3; ++d) sum[std::size_t(d)] += point[d];
-    ++count;
-  }
-  if (count == 0) return std::nullopt;
-  for (double& s : sum) s /= double(count);
-  return sum;
-}
-
-/// Where the surgeon looks first: the strongest activation of the first warped statistics overlay,
-/// else the centre of the warped tumour.
-std::optional<std::array<double, 3>> focusOf(const Scene& scene)
-{
-  for (const auto& volume : scene.nodesOfType<ScalarVolumeNode>()) {
-    if (volume->role() == "overlay" && volume->name() != UncertaintyName && volume->image()) return strongestVoxel(*volume->image());
-  }
-  const auto labels = scene.findByName<LabelMapVolumeNode>("warped preop labels");
-  if (labels && labels->image()) return labelCentroid(*labels->image(), 4);
-  return std::nullopt;
 }
 
 /// Reads a scan's scene aside: what the views will show of it.
@@ -108,7 +57,7 @@ std::shared_ptr<IntraoperativeUpdatePanel::ShownScan> readScanResult(const fs::p
   }
   try {
     readScene(shown->scene, file);
-    shown->focus = focusOf(shown->scene);
+    shown->focus = updateFocusPoint(shown->scene);
   } catch (const std::exception& e) {
     shown->scene.clear();
     shown->error = e.what();
@@ -338,6 +287,11 @@ void IntraoperativeUpdatePanel::prepareCase()
 void IntraoperativeUpdatePanel::startWatching()
 {
   if (!isPrepared()) return;
+  if (watchFolder_->text().trimmed().isEmpty()) {
+    status_->setText(tr("Choose the scanner's folder to watch."));
+    watch_->setChecked(false);
+    return;
+  }
   try {
     watcher_ = std::make_unique<ScanFolderWatcher>(watchFolder_->text().trimmed().toStdString());
   } catch (const std::exception& e) {
@@ -495,7 +449,7 @@ void IntraoperativeUpdatePanel::present(ShownScan& shown, unsigned number)
   for (const auto& volume : scene_.nodesOfType<ScalarVolumeNode>()) {
     if (volume->role() == "overlay") overlays.push_back(volume);
   }
-  std::stable_partition(overlays.begin(), overlays.end(), [](const auto& v) { return v->name() != UncertaintyName; });
+  std::stable_partition(overlays.begin(), overlays.end(), [](const auto& v) { return v->name() != DisplacementUncertaintyNodeName; });
   for (const auto& volume : overlays) {
     overlayIds_.push_back(volume->id());
     overlayChoice_->addItem(QString::fromStdString(volume->name()));

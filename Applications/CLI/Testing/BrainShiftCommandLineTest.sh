@@ -393,23 +393,8 @@ TrustAssessment)
   float_check "$out/good/report.json" "['trust']['moved']['gain']" "> 0.02"
   [ -e "$out/good/rejected_intraop_to_preop.h5" ] && fail "a trusted update wrote rejected_intraop_to_preop.h5"
   grep -q "rigid fallback" "$out/good/scene.mrml" && fail "the scene of a trusted update says rigid fallback"
-  python3 - "$demo/intraop_labels.nii.gz" "$out/damaged/intraop_labels.nii.gz" <<'PY'
-import gzip, struct, sys
-# The segmentation moved 3 voxels (7.5 mm on the small case) along the first grid axis.
-raw = gzip.open(sys.argv[1], 'rb').read()
-dims = struct.unpack_from('<8h', raw, 40)
-size = struct.unpack_from('<h', raw, 72)[0] // 8
-offset = int(struct.unpack_from('<f', raw, 108)[0])
-nx, rows, k = dims[1], dims[2] * dims[3], 3
-data = bytearray(raw[offset:])
-out = bytearray(len(data))
-row = nx * size
-for r in range(rows):
-    line = data[r * row:(r + 1) * row]
-    out[r * row + k * size:(r + 1) * row] = line[: row - k * size]
-with gzip.open(sys.argv[2], 'wb') as f:
-    f.write(raw[:offset] + bytes(out))
-PY
+  # The segmentation moved 3 voxels (7.5 mm on the small case) along the first grid axis.
+  shift_labels_along_first_axis "$demo/intraop_labels.nii.gz" "$out/damaged/intraop_labels.nii.gz"
   cp "$demo/rigid_intraop_to_preop.tfm" "$demo/mesh.vtu" "$out/damaged/"
   "$brainshift" surface --preop-labels "$L" --intraop-image "$I" --output-dir "$out/damaged" >/dev/null || fail "surface exited $?"
   "$brainshift" simulate --output-dir "$out/damaged" >/dev/null || fail "simulate exited $?"
@@ -810,21 +795,7 @@ OtherContrast)
   float_check "$r" "['stages']['surface']['outside_sides']" "== 2"
   # The T2 case's segmentation moved 3 voxels (7.5 mm) along the first grid axis: rejected.
   mkdir -p "$other/t2-moved"
-  python3 - "$other/t2/intraop_labels.nii.gz" "$other/t2-moved/intraop_labels.nii.gz" <<'PY'
-import gzip, struct, sys
-raw = gzip.open(sys.argv[1], 'rb').read()
-dims = struct.unpack_from('<8h', raw, 40)
-size = struct.unpack_from('<h', raw, 72)[0] // 8
-offset = int(struct.unpack_from('<f', raw, 108)[0])
-nx, rows, k = dims[1], dims[2] * dims[3], 3
-data = bytearray(raw[offset:])
-out = bytearray(len(data))
-row = nx * size
-for r in range(rows):
-    out[r * row + k * size:(r + 1) * row] = data[r * row:(r + 1) * row][: row - k * size]
-with gzip.open(sys.argv[2], 'wb') as f:
-    f.write(raw[:offset] + bytes(out))
-PY
+  shift_labels_along_first_axis "$other/t2/intraop_labels.nii.gz" "$other/t2-moved/intraop_labels.nii.gz"
   c=$other/t2/case
   cp "$other/t2/rigid_intraop_to_preop.tfm" "$other/t2/mesh.vtu" "$other/t2-moved/"
   "$brainshift" surface --preop-labels "$c/preop_labels.nii.gz" --intraop-image "$c/intraop_image.nii.gz" --output-dir "$other/t2-moved" >/dev/null ||

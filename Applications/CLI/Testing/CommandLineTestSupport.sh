@@ -35,3 +35,24 @@ float_check() {
 }
 
 checksums() { find "$@" -type f -print0 | sort -z | xargs -0 sha256sum; }
+
+# shift_labels_along_first_axis IN.nii.gz OUT.nii.gz: a damaged segmentation, the label map moved
+# 3 voxels along its first grid axis (what enters at the edge is 0). For uncompressed-header NIfTI-1
+# label maps as the classify stage writes them.
+shift_labels_along_first_axis() {
+  python3 - "$1" "$2" <<'PY'
+import gzip, struct, sys
+raw = gzip.open(sys.argv[1], 'rb').read()
+dims = struct.unpack_from('<8h', raw, 40)
+size = struct.unpack_from('<h', raw, 72)[0] // 8
+offset = int(struct.unpack_from('<f', raw, 108)[0])
+nx, rows, k = dims[1], dims[2] * dims[3], 3
+data = bytearray(raw[offset:])
+out = bytearray(len(data))
+row = nx * size
+for r in range(rows):
+    out[r * row + k * size:(r + 1) * row] = data[r * row:(r + 1) * row][: row - k * size]
+with gzip.open(sys.argv[2], 'wb') as f:
+    f.write(raw[:offset] + bytes(out))
+PY
+}
