@@ -128,10 +128,14 @@ Configuration Configuration::load(const fs::path& path)
       configuration.classificationTumourResected = c["tumour_resected"].get<std::string>();
     }
     if (c.contains("refinement_passes")) {
-      if (!c["refinement_passes"].is_number_integer() || c["refinement_passes"].get<int>() < 0) {
-        throw InputError(file + ": classification.refinement_passes must be a whole number >= 0");
+      const json& passes = c["refinement_passes"];
+      if (passes.is_string() && passes.get<std::string>() == "auto") {
+        configuration.classificationRefinementPasses.reset();
+      } else if (passes.is_number_integer() && passes.get<int>() >= 0) {
+        configuration.classificationRefinementPasses = passes.get<unsigned>();
+      } else {
+        throw InputError(file + ": classification.refinement_passes must be \"auto\" or a whole number >= 0");
       }
-      configuration.classificationRefinementPasses = c["refinement_passes"].get<unsigned>();
     }
     if (c.contains("refinement_reach_mm")) {
       configuration.classificationRefinementReachMm = number(c["refinement_reach_mm"], file + ": classification.refinement_reach_mm");
@@ -316,8 +320,8 @@ void Configuration::validate(const std::string& source) const
   if (classificationTumourResected != "auto" && classificationTumourResected != "yes" && classificationTumourResected != "no") {
     throw InputError(source + ": classification tumour_resected '" + classificationTumourResected + "' is not one of auto, yes, no");
   }
-  if (classificationRefinementPasses > 10) {
-    throw InputError(source + ": classification refinement passes " + std::to_string(classificationRefinementPasses) + " is outside 0 to 10");
+  if (classificationRefinementPasses && *classificationRefinementPasses > 10) {
+    throw InputError(source + ": classification refinement passes " + std::to_string(*classificationRefinementPasses) + " is outside 0 to 10");
   }
   if (!std::isfinite(classificationRefinementToleranceMm) || classificationRefinementToleranceMm <= 0 ||
       classificationRefinementToleranceMm > 10) {

@@ -4,6 +4,7 @@
 #include <array>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -54,7 +55,11 @@ struct Configuration {
   /// after a solve the preoperative labels warped by it become the spatial prior, and the
   /// classification, the surface and the solve run again, at most this many times more, until the
   /// imposed surface displacement changes by less than the tolerance (mean over its nodes).
-  unsigned classificationRefinementPasses = 0;
+  /// Empty: "auto", one pass where the scan's fluid is brighter than its parenchyma (T2-like: the
+  /// classification's own rule for the gap under the craniotomy measures fluid thickness over the
+  /// aligned preoperative brain only in T1-like scans, and the warped prior takes its place), none
+  /// elsewhere.
+  std::optional<unsigned> classificationRefinementPasses;
   double classificationRefinementToleranceMm = 0.25;
   /// A refine pass reclassifies only within this distance of where the solve moved the tissue by
   /// more than 1 mm, and keeps the first classification elsewhere (0: everywhere).

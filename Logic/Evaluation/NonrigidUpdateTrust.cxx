@@ -3,6 +3,7 @@
 #include "DistanceMaps.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -60,35 +61,113 @@ void checkOnGrid(const TImage* image, const ImageGeometry& grid, const char* nam
   }
 }
 
-MaskPointer brainMaskOf(const LabelImage& labels)
+bool isBrainLabel(LabelPixel l)
 {
-  MaskPointer mask = ImageGeometry::of(&labels).allocate<MaskImage>();
-  const LabelPixel* l = labels.GetBufferPointer();
+  return l == 2 || l == 3 || l == 4;
+}
+
+/// The box of voxel indices (first, one past the last, per axis) that holds the brain of every
+/// given map, grown by `margin` voxels per axis and clamped to the grid; empty (first == last on
+/// an axis) when no map has brain.
+struct IndexBox {
+  std::array<std::size_t, 3> first{}, last{};
+  std::size_t voxels() const { return (last[0] - first[0]) * (last[1] - first[1]) * (last[2] - first[2]); }
+};
+
+IndexBox brainBox(const std::vector<const LabelImage*>& maps, const ImageGeometry& grid, const std::array<std::size_t, 3>& margin)
+{
+  const std::size_t nx = grid.size[0], ny = grid.size[1], nz = grid.size[2];
+  std::array<std::size_t, 3> low{nx, ny, nz}, high{0, 0, 0};
+  for (const LabelImage* labels : maps) {
+    const LabelPixel* l = labels->GetBufferPointer();
+    for (std::size_t z = 0, i = 0; z < nz; ++z) {
+      for (std::size_t y = 0; y < ny; ++y) {
+        for (std::size_t x = 0; x < nx; ++x, ++i) {
+          if (!isBrainLabel(l[i])) continue;
+          const std::array<std::size_t, 3> at{x, y, z};
+          for (int a = 0; a < 3; ++a) {
+            low[a] = std::min(low[a], at[a]);
+            high[a] = std::max(high[a], at[a] + 1);
+          }
+        }
+      }
+    }
+  }
+  IndexBox box;
+  for (int a = 0; a < 3; ++a) {
+    if (high[a] <= low[a]) return box;
+    box.first[a] = low[a] > margin[a] ? low[a] - margin[a] : 0;
+    box.last[a] = std::min<std::size_t>(grid.size[a], high[a] + margin[a]);
+  }
+  return box;
+}
+
+/// The brain (labels 2, 3, 4) of `labels` within `box`, as an image of its own whose voxels lie
+/// where they lie on the full grid.
+MaskPointer brainMaskIn(const LabelImage& labels, const ImageGeometry& grid, const IndexBox& box)
+{
+  ImageGeometry cropped = grid;
+  LabelImage::IndexType corner;
+  for (int a = 0; a < 3; ++a) {
+    cropped.size[a] = box.last[a] - box.first[a];
+    corner[a] = itk::IndexValueType(box.first[a]);
+  }
+  labels.TransformIndexToPhysicalPoint(corner, cropped.origin);
+  MaskPointer mask = cropped.allocate<MaskImage>();
   unsigned char* m = mask->GetBufferPointer();
-  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
-  for (std::size_t i = 0; i < n; ++i) m[i] = (l[i] == 2 || l[i] == 3 || l[i] == 4) ? 1 : 0;
+  const LabelPixel* l = labels.GetBufferPointer();
+  for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
+    for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
+      const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
+      for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) m[j] = isBrainLabel(l[row + x]) ? 1 : 0;
+    }
+  }
   return mask;
 }
 
 /// Per voxel: 1 band (near any map's brain boundary), 2 interior (inside the first of the
-/// classification and the rigidly warped labels, beyond the band), 0 elsewhere.
+/// classification and the rigidly warped labels, beyond the band), 0 elsewhere. The distances are
+/// computed in the box that holds every map's brain, grown by twice the band and a few voxels:
+/// beyond it no voxel is within the band of a boundary, nor inside a brain, and the box's own
+/// faces (which the distance maps may take for a boundary of the outside) are more than twice the
+/// band from any brain, so the region is the one of distances over the whole grid.
 std::vector<unsigned char> regionsOf(const NonrigidUpdateTrustInputs& in, double bandHalfWidthMm, std::size_t n)
 {
   std::vector<unsigned char> region(n, 0);
   const LabelImage* interiorSource =
     in.intraopLabels ? in.intraopLabels : in.labelsWarpedByRigid ? in.labelsWarpedByRigid : in.labelsWarpedByUpdate;
-  std::vector<float> interiorDistance;
+  std::vector<const LabelImage*> maps;
   for (const LabelImage* labels : {in.intraopLabels, in.labelsWarpedByUpdate, in.labelsWarpedByRigid}) {
-    if (!labels) continue;
-    const ScalarImage::Pointer distance = boundaryDistanceMm(brainMaskOf(*labels));
-    const float* d = distance->GetBufferPointer();
-    for (std::size_t i = 0; i < n; ++i) {
-      if (std::abs(d[i]) <= bandHalfWidthMm) region[i] = 1;
-    }
-    if (labels == interiorSource) interiorDistance.assign(d, d + n);
+    if (labels) maps.push_back(labels);
   }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (region[i] == 0 && interiorDistance[i] < 0) region[i] = 2;
+  const ImageGeometry grid = ImageGeometry::of(maps.front());
+  std::array<std::size_t, 3> margin{};
+  for (int a = 0; a < 3; ++a) margin[a] = std::size_t(std::ceil(2 * bandHalfWidthMm / grid.spacing[a])) + 3;
+  const IndexBox box = brainBox(maps, grid, margin);
+  if (box.voxels() == 0) return region;
+  std::vector<float> interiorDistance;
+  for (const LabelImage* labels : maps) {
+    const ScalarImage::Pointer distance = boundaryDistanceMm(brainMaskIn(*labels, grid, box));
+    const float* d = distance->GetBufferPointer();
+    const bool interiorMap = labels == interiorSource;
+    if (interiorMap) interiorDistance.assign(box.voxels(), 0.0f);
+    for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
+      for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
+        const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
+        for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
+          if (std::abs(d[j]) <= bandHalfWidthMm) region[row + x] = 1;
+          if (interiorMap) interiorDistance[j] = d[j];
+        }
+      }
+    }
+  }
+  for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
+    for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
+      const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
+      for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
+        if (region[row + x] == 0 && interiorDistance[j] < 0) region[row + x] = 2;
+      }
+    }
   }
   return region;
 }
@@ -160,6 +239,14 @@ std::string figure(const char* format, double a, double b = 0, double c = 0)
   return text;
 }
 
+/// A small loss where the update moves the brain against a clear gain inside it (the parameters'
+/// mixed evidence); only when the moved region decides.
+bool isMixedEvidence(const NonrigidUpdateTrustAssessment& a, bool movedScored, const NonrigidUpdateTrustParameters& p)
+{
+  return movedScored && a.moved.gain() >= p.mixedLossDownTo && a.interior.voxels >= p.minimumVoxels &&
+         a.interior.gain() >= p.mixedInteriorGainFrom;
+}
+
 void judge(NonrigidUpdateTrustAssessment& a, const NonrigidUpdateTrustInputs& in, const NonrigidUpdateTrustParameters& p)
 {
   auto downgrade = [&a](UpdateTrust to, const std::string& reason) {
@@ -171,7 +258,11 @@ void judge(NonrigidUpdateTrustAssessment& a, const NonrigidUpdateTrustInputs& in
   const char* where = movedScored ? "where the update moves the brain" : "near the brain boundary";
   if (decisive.voxels >= p.minimumVoxels) {
     const std::string figures = figure("(correlation ratio %.3f against %.3f) ", decisive.nonrigid, decisive.rigid) + where;
-    if (decisive.gain() < p.rejectGainBelow) {
+    if (decisive.gain() < p.rejectGainBelow && isMixedEvidence(a, movedScored, p)) {
+      downgrade(UpdateTrust::Doubtful, "the image under the update matches the intraoperative scan a little worse than the rigid result " +
+                                         figures + figure(", but better inside the brain (%.3f against %.3f)", a.interior.nonrigid,
+                                                          a.interior.rigid));
+    } else if (decisive.gain() < p.rejectGainBelow) {
       downgrade(UpdateTrust::Rejected, "the image under the update matches the intraoperative scan worse than the rigid result " + figures);
     } else if (decisive.gain() < p.doubtGainBelow) {
       downgrade(UpdateTrust::Doubtful, "the image under the update matches the intraoperative scan hardly better than the rigid result " +

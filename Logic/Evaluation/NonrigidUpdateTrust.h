@@ -66,6 +66,13 @@ struct NonrigidUpdateTrustParameters {
   /// boundary) below which the update is rejected, and below which it is doubtful (not clearly better).
   double rejectGainBelow = -0.005;
   double doubtGainBelow = 0.01;
+  /// Mixed evidence: where the update moves the brain it matches a little worse (a gain between
+  /// `mixedLossDownTo` and `rejectGainBelow`) while inside the brain, beyond the boundary band (where
+  /// the image's own block matches carry the update), it matches clearly better (a gain of at least
+  /// `mixedInteriorGainFrom`): doubtful, shown with its reason, instead of rejected. A larger loss,
+  /// or no clear gain inside, is still rejected.
+  double mixedLossDownTo = -0.05;
+  double mixedInteriorGainFrom = 0.005;
   /// Share of the surface nodes freed because no boundary matched them.
   double rejectUnmatchedShare = 0.30, doubtUnmatchedShare = 0.15;
   double doubtResidualMm = 1.5;

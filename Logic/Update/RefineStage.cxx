@@ -97,13 +97,25 @@ WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
   return {warpLabelVolume(context.preopLabels("refine"), *deformation.field), reachMm > 0 ? regionMovedBySolve(*deformation.field, *rigid, MovedMm, reachMm) : nullptr};
 }
 
+/// The passes to run: the configured number, or ("auto") one where the first classification
+/// found this scan's fluid brighter than its parenchyma, none elsewhere; and why.
+std::pair<unsigned, std::string> refinementPasses(RunContext& context)
+{
+  const std::optional<unsigned> configured = context.configuration().classificationRefinementPasses;
+  if (configured) return {*configured, "configured"};
+  const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+  const bool fluidBright = classify.contains("contrast") && classify["contrast"].value("fluid", "") == "brighter than the parenchyma";
+  return fluidBright ? std::pair<unsigned, std::string>{1, "auto: the scan's fluid is brighter than its parenchyma"}
+                     : std::pair<unsigned, std::string>{0, "auto: the scan's fluid is darker than its parenchyma"};
+}
+
 } // namespace
 
 void runRefineStage(RunContext& context)
 {
   Stopwatch clock;
   const Configuration& configuration = context.configuration();
-  const unsigned maximumPasses = configuration.classificationRefinementPasses;
+  const auto [maximumPasses, passesFrom] = refinementPasses(context);
   const double tolerance = configuration.classificationRefinementToleranceMm;
   nlohmann::json passes = nlohmann::json::array();
   bool settled = false;
@@ -120,6 +132,11 @@ void runRefineStage(RunContext& context)
   // What the first pass did once for the whole scan stays said in its stages' entries.
   const nlohmann::json firstSurface = context.report().hasStage("surface") ? context.report().stage("surface") : nlohmann::json::object();
   const nlohmann::json firstSimulate = context.report().hasStage("simulate") ? context.report().stage("simulate") : nlohmann::json::object();
+  const nlohmann::json firstClassify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+  const std::optional<bool> firstTumourDecision =
+    firstClassify.contains("tumour_resected") && firstClassify["tumour_resected"].is_boolean()
+      ? std::optional<bool>(firstClassify["tumour_resected"].get<bool>())
+      : std::nullopt;
   auto keepFirstPassFacts = [&] {
     nlohmann::json surface = context.report().stage("surface");
     for (const char* key : {"preop_boundary_from", "preop_boundary_seconds"}) {
@@ -135,7 +152,8 @@ void runRefineStage(RunContext& context)
       Stopwatch passClock;
       const auto before = imposedDisplacements(context.output("brain_surface.vtp"));
       const WarpedPrior prior = labelsWarpedBySolve(context, configuration.classificationRefinementReachMm);
-      context.setWarpedPrior(prior.labels, int(pass), configuration.classificationRefinementReachMm > 0 ? prior.moved : nullptr, anchor);
+      context.setWarpedPrior(prior.labels, int(pass), configuration.classificationRefinementReachMm > 0 ? prior.moved : nullptr, anchor,
+                             firstTumourDecision);
       const double priorSeconds = passClock.seconds();
       runClassifyStage(context);
       runSurfaceStage(context);
@@ -167,6 +185,7 @@ void runRefineStage(RunContext& context)
   context.report().setStage("refine", {{"wall_seconds", clock.seconds()},
                                        {"passes", passes.size()},
                                        {"maximum_passes", maximumPasses},
+                                       {"passes_from", passesFrom},
                                        {"tolerance_mm", tolerance},
                                        {"settled", settled || maximumPasses == 0},
                                        {"per_pass", passes}});

@@ -233,7 +233,12 @@ void runClassifyStage(RunContext& context)
     parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
   }
   const LabelImage* prior = context.warpedPrior();
+  // refine: the first classification's tumour decision stands (unless the user gave one).
+  const bool decisionKept = prior && context.firstTumourDecision() && parameters.tumourResection == TumourResection::Auto;
+  if (decisionKept) parameters.tumourResection = *context.firstTumourDecision() ? TumourResection::Resected : TumourResection::InPlace;
   const TissueClassificationResult result = classifyWithPrior(context, *rigid, prototypes, parameters);
+  nlohmann::json tumourEvidence = tumourEvidenceJson(result.tumourEvidence);
+  if (decisionKept) tumourEvidence["decided_by"] = "the first classification (through the rigid prior)";
   // refine: the first classification stays where the solve moved nothing.
   const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
                                    ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
@@ -256,7 +261,7 @@ void runClassifyStage(RunContext& context)
                                          {"prototypes_from", prototypesFile ? prototypesFile->string() : std::string()},
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
-                                         {"tumour_evidence", tumourEvidenceJson(result.tumourEvidence)},
+                                         {"tumour_evidence", tumourEvidence},
                                          {"contrast", scanContrastJson(result.contrast)},
                                          {"relabelled_where_moved", relabelled},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
@@ -836,6 +841,7 @@ nlohmann::json trustEntry(const NonrigidUpdateTrustAssessment& a, double seconds
           {"unmatched_surface_node_share", a.unmatchedShare},
           {"folded_voxel_share", a.foldedShare},
           {"thresholds", {{"reject_gain_below", p.rejectGainBelow}, {"doubt_gain_below", p.doubtGainBelow},
+                          {"mixed_loss_down_to", p.mixedLossDownTo}, {"mixed_interior_gain_from", p.mixedInteriorGainFrom},
                           {"reject_unmatched_share", p.rejectUnmatchedShare}, {"doubt_unmatched_share", p.doubtUnmatchedShare},
                           {"doubt_residual_mm", p.doubtResidualMm}, {"reject_folded_share", p.rejectFoldedShare},
                           {"doubt_folded_share", p.doubtFoldedShare},

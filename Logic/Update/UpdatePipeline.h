@@ -126,13 +126,18 @@ public:
   /// classification replace `anchor`, the classification through the rigid prior (elsewhere the two
   /// priors agree, and an ambiguous boundary left to the prior alone would follow the last pass's
   /// own error from pass to pass).
-  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr)
+  /// `tumourResected`: the first classification's decision, which a refine pass keeps (the warped
+  /// prior carries the first solve's errors into the place where the tumour is looked at).
+  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr,
+                      std::optional<bool> tumourResected = std::nullopt)
   {
     warpedPrior_ = std::move(labels);
     warpedPriorPass_ = pass;
     movedByPrior_ = std::move(moved);
     anchorLabels_ = std::move(anchor);
+    firstTumourDecision_ = tumourResected;
   }
+  std::optional<bool> firstTumourDecision() const { return firstTumourDecision_; }
   const LabelImage* warpedPrior() const { return warpedPrior_.GetPointer(); }
   int warpedPriorPass() const { return warpedPriorPass_; }
   const MaskImage* movedByPrior() const { return movedByPrior_.GetPointer(); }
@@ -155,6 +160,7 @@ private:
   int warpedPriorPass_ = 0;
   MaskImage::Pointer movedByPrior_;
   LabelImage::Pointer anchorLabels_;
+  std::optional<bool> firstTumourDecision_;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image

@@ -635,8 +635,8 @@ HardScenario)
   float_check "$e" "['transforms']['brainshift']['groups']['near-cavity']['mean_mm']" "< 0.3 * $rigid_cavity"
   [ "$(json_value "$hard/report.json" "['trust']['nonrigid']")" = "trusted" ] || fail "the hard scenario's update was not trusted"
   float_check "$hard/report.json" "['stages']['surface']['directional_nodes']" "> 100"
-  # The refine stage (off by default: it made the scenarios worse, README) runs when asked and
-  # reports each pass.
+  # The refine stage (by default only in T2-like scans: elsewhere it made the scenarios worse,
+  # README) runs when asked and reports each pass.
   printf '{"classification": {"refinement_passes": 1}}\n' > "$work/hard-refine.json"
   "$brainshift" refine --preop-image "$hard/case/preop_image.nii.gz" --preop-labels "$hard/case/preop_labels.nii.gz" \
     --intraop-image "$hard/case/intraop_image.nii.gz" --output-dir "$hard" --config "$work/hard-refine.json" >/dev/null \
@@ -793,6 +793,13 @@ OtherContrast)
   [ "$(json_value "$r" "['stages']['classify']['contrast']['fluid']")" = "brighter than the parenchyma" ] ||
     fail "T2: the classification did not learn that fluid is bright"
   float_check "$r" "['stages']['surface']['outside_sides']" "== 2"
+  # Fluid brighter than the parenchyma: one refine pass by default (refinement_passes "auto"),
+  # which keeps the first classification's tumour decision.
+  float_check "$r" "['stages']['refine']['passes']" "== 1"
+  [ "$(json_value "$r" "['stages']['refine']['passes_from']")" = "auto: the scan's fluid is brighter than its parenchyma" ] ||
+    fail "T2: the refine stage did not choose its pass from the contrast"
+  [ "$(json_value "$r" "['stages']['classify']['tumour_evidence']['decided_by']")" = "the first classification (through the rigid prior)" ] ||
+    fail "T2: the refine pass did not keep the first tumour decision"
   # The T2 case's segmentation moved 3 voxels (7.5 mm) along the first grid axis: rejected.
   mkdir -p "$other/t2-moved"
   shift_labels_along_first_axis "$other/t2/intraop_labels.nii.gz" "$other/t2-moved/intraop_labels.nii.gz"
@@ -813,6 +820,9 @@ OtherContrast)
   float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 0.6 * $rigid_mean"
   [ "$(json_value "$other/t1post/report.json" "['trust']['nonrigid']")" = "trusted" ] || fail "T1 post-contrast: the update was not trusted"
   float_check "$other/t1post/report.json" "['stages']['surface']['outside_sides']" "== 1"
+  float_check "$other/t1post/report.json" "['stages']['refine']['passes']" "== 0"
+  [ "$(json_value "$other/t1post/report.json" "['stages']['refine']['passes_from']")" = "auto: the scan's fluid is darker than its parenchyma" ] ||
+    fail "T1 post-contrast: the refine stage did not choose no pass from the contrast"
   ;;
 
 *)

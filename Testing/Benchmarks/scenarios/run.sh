@@ -3,7 +3,8 @@
 # where real surgery makes it hard (fluid and air under the craniotomy, another scanner's contrast,
 # tumours resected or not, shifts of 5 to 20 mm at four sites, strong noise and bias, a misaligned
 # head), against the truth of each case, beside the easy default case. Each scenario runs as:
-#   once         the product's default: the classification once, through the rigid prior
+#   once         the product's default: the classification through the rigid prior, and one refine
+#                pass only where the scan's fluid is brighter than its parenchyma (refinement "auto")
 #   refined      the refine stage on (classification.refinement_passes 2): it reclassifies with the
 #                preoperative labels warped by the solve, and solves again
 #   true-labels  the true intraoperative labels instead of the classification: the ceiling of a
@@ -41,7 +42,7 @@ mkdir -p "$out/runs"
 
 once_config=$out/runs/once.json
 refined_config=$out/runs/refined.json
-echo '{"classification": {"refinement_passes": 0}}' > "$once_config"
+echo '{"classification": {"refinement_passes": "auto"}}' > "$once_config"
 echo '{"classification": {"refinement_passes": 2}}' > "$refined_config"
 
 for scenario in "${scenarios[@]}"; do

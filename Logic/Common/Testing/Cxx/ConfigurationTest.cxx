@@ -29,6 +29,8 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(shipped.meshCoarseningLevels == defaults.meshCoarseningLevels);
     BS_CHECK(shipped.classificationFluidThicknessInAlignedBrain && defaults.classificationFluidThicknessInAlignedBrain);
     BS_CHECK(shipped.classificationTumourFluidByLook && defaults.classificationTumourFluidByLook);
+    // Refinement passes "auto" (empty: chosen from the scan's contrast) in both.
+    BS_CHECK(!shipped.classificationRefinementPasses && !defaults.classificationRefinementPasses);
 
     const fs::path file = folder / "config.json";
     writeTextFileAtomically(file, R"({"materials": {"4": {"youngs_modulus_pa": 20000}},
@@ -36,7 +38,8 @@ int ConfigurationTest(int, char*[])
                                                "region_of_interest": {"center_lps": [10, -20, 30.5], "radius_mm": 12}},
                                       "solver": {"options": "-ksp_type gmres -pc_type bjacobi"},
                                       "rigid": {"sampling": 0.5, "levels": 2},
-                                      "classification": {"fluid_thickness_in_aligned_brain": false, "tumour_fluid_by_look": false}})");
+                                      "classification": {"fluid_thickness_in_aligned_brain": false, "tumour_fluid_by_look": false,
+                                                         "refinement_passes": 2}})");
     const Configuration c = Configuration::load(file);
     BS_CHECK_NEAR(c.materials.at(4).youngsModulusPa, 20000.0, 0);
     BS_CHECK_NEAR(c.materials.at(4).poissonRatio, 0.45, 0); // the rest of label 4 keeps its default
@@ -51,6 +54,7 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(c.rigidSamplingFraction, 0.5, 0);
     BS_CHECK(c.rigidLevels == 2);
     BS_CHECK(!c.classificationFluidThicknessInAlignedBrain && !c.classificationTumourFluidByLook);
+    BS_CHECK(c.classificationRefinementPasses && *c.classificationRefinementPasses == 2);
 
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
@@ -72,6 +76,9 @@ int ConfigurationTest(int, char*[])
     refused(R"({"rigid": {"sampling": 0}})", "rigid sampling");
     refused(R"({"rigid": {"pyramid": 2}})", "unknown key \"pyramid\"");
     refused(R"({"classification": {"tumour_fluid_by_look": 1}})", "classification.tumour_fluid_by_look");
+    refused(R"({"classification": {"refinement_passes": "always"}})", "classification.refinement_passes must be \"auto\"");
+    refused(R"({"classification": {"refinement_passes": -1}})", "classification.refinement_passes");
+    refused(R"({"classification": {"refinement_passes": 11}})", "refinement passes 11 is outside 0 to 10");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });

@@ -3,6 +3,7 @@
 // transform alone and is trusted; the one that moves it the wrong way scores below and is rejected;
 // both also when the intraoperative scan has another, non-monotonic contrast (fluid bright, white
 // matter dark, as in a T2) and noise. The stages' figures (freed nodes, folding) reject on their own.
+// A small loss where the update moves the brain against a clear gain inside it is doubtful.
 #include "BrainShiftTestingSupport.h"
 #include "NonrigidUpdateTrust.h"
 #include "SyntheticData.h"
@@ -86,7 +87,7 @@ DisplacementFieldImage::Pointer constantField(const ImageGeometry& g, double dz)
 /// The assessment of an update that displaces the preoperative brain by `updateOffsetZ` on the
 /// intraoperative grid (the right update: -SinkMm), against the rigid transform (the identity here).
 NonrigidUpdateTrustAssessment assess(const ImageGeometry& g, bool otherContrast, double updateOffsetZ,
-                                     NonrigidUpdateTrustInputs extra = {})
+                                     NonrigidUpdateTrustInputs extra = {}, const NonrigidUpdateTrustParameters& parameters = {})
 {
   const ScalarImage::Pointer intraop = intraopScan(g, otherContrast);
   const ScalarImage::Pointer byUpdate = imageOn<ScalarImage>(g, [&](const PhysicalPoint& p) { return float(head(p, updateOffsetZ)); });
@@ -103,7 +104,7 @@ NonrigidUpdateTrustAssessment assess(const ImageGeometry& g, bool otherContrast,
   in.labelsWarpedByRigid = labelsByRigid.GetPointer();
   in.updateField = updateField.GetPointer();
   in.rigidField = rigidField.GetPointer();
-  return assessNonrigidUpdate(in);
+  return assessNonrigidUpdate(in, parameters);
 }
 } // namespace
 
@@ -155,6 +156,30 @@ int NonrigidUpdateTrustTest(int, char*[])
     BS_CHECK(assess(g, false, -SinkMm, folded).trust == UpdateTrust::Doubtful);
     folded.foldedVoxels = 1; // a voxel or two fold in good updates as well
     BS_CHECK(assess(g, false, -SinkMm, folded).trust == UpdateTrust::Trusted);
+
+    // Mixed evidence: a small loss where the update moves the brain (here: the thresholds moved above
+    // the right update's own gain, so that its gain counts as a loss) with a clear gain inside the
+    // brain is doubtful, not rejected; without the gain inside, or with a larger loss, rejected.
+    {
+      const NonrigidUpdateTrustAssessment right = assess(g, false, -SinkMm);
+      const double movedGain = right.moved.gain(), interiorGain = right.interior.gain();
+      BS_CHECK_MSG(interiorGain > 0.01, "the right update gains " << interiorGain << " inside the brain");
+      NonrigidUpdateTrustParameters mixed;
+      mixed.rejectGainBelow = movedGain + 0.01;
+      mixed.doubtGainBelow = movedGain + 0.02;
+      mixed.mixedLossDownTo = movedGain - 0.01;
+      mixed.mixedInteriorGainFrom = interiorGain - 0.001;
+      const NonrigidUpdateTrustAssessment doubtful = assess(g, false, -SinkMm, {}, mixed);
+      BS_CHECK_MSG(doubtful.trust == UpdateTrust::Doubtful, trustName(doubtful.trust));
+      BS_CHECK(doubtful.reasons.size() == 1 && doubtful.reasons[0].find("but better inside the brain") != std::string::npos);
+      NonrigidUpdateTrustParameters noGainInside = mixed;
+      noGainInside.mixedInteriorGainFrom = interiorGain + 0.001;
+      BS_CHECK(assess(g, false, -SinkMm, {}, noGainInside).trust == UpdateTrust::Rejected);
+      NonrigidUpdateTrustParameters largerLoss = mixed;
+      largerLoss.mixedLossDownTo = movedGain + 0.005;
+      const NonrigidUpdateTrustAssessment rejected = assess(g, false, -SinkMm, {}, largerLoss);
+      BS_CHECK(rejected.trust == UpdateTrust::Rejected && rejected.reasons[0].find("worse than the rigid result") != std::string::npos);
+    }
 
     // Images off the intraoperative grid are refused.
     const ImageGeometry other = grid({{40, 44, 44}}, {{1.5, 1.5, 1.5}}, point(-32.25, -32.25, -32.25));
