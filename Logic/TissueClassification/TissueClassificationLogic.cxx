@@ -553,36 +553,59 @@ std::shared_ptr<const PreoperativeTissueMaps> preparePreoperativeTissueMaps(cons
   return maps;
 }
 
-TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
-                                           const SpatialTransform& rigid,
-                                           const std::optional<std::vector<TissuePrototype>>& given,
-                                           const TissueClassificationParameters& P)
-{
-  P.validate();
-  TissueClassificationResult result;
-  const auto start = Clock::now();
-  const auto size = intraop.GetLargestPossibleRegion().GetSize();
-  const std::size_t N = intraop.GetLargestPossibleRegion().GetNumberOfPixels();
-  result.voxels = N;
+namespace {
 
-  // The tissues of the preoperative labels, and their distance maps.
-  std::shared_ptr<const PreoperativeTissueMaps> maps = P.preoperativeMaps;
-  if (!maps) {
-    maps = preparePreoperativeTissueMaps(preopLabels);
-  } else if (maps->labels != &preopLabels || maps->voxels != preopLabels.GetBufferPointer()) {
+/// What the steps of one classification share: the scan, the parameters, the preoperative tissues
+/// and, as the steps fill them, the saturated distances to each tissue on the intraoperative grid,
+/// the head, the intensity channel, the features and the prototypes.
+struct ClassificationWork {
+  ClassificationWork(const ScalarImage& scan, const TissueClassificationParameters& parameters,
+                     std::shared_ptr<const PreoperativeTissueMaps> tissueMaps)
+    : intraop(scan)
+    , P(parameters)
+    , size(scan.GetLargestPossibleRegion().GetSize())
+    , N(scan.GetLargestPossibleRegion().GetNumberOfPixels())
+    , maps(std::move(tissueMaps))
+    , T(maps->tissues.size())
+    , D(1 + T) // intensity, then one distance per tissue
+  {
+  }
+  const ScalarImage& intraop;
+  const TissueClassificationParameters& P;
+  const itk::Size<3> size;
+  const std::size_t N;
+  const std::shared_ptr<const PreoperativeTissueMaps> maps;
+  const std::size_t T, D;
+  std::vector<float> signedDistances; ///< N x T, saturated at P.saturationMm
+  std::vector<unsigned char> head;    ///< not background in the aligned labels
+  std::vector<float> intensity;       ///< 0-100 over the head
+  std::vector<float> features;        ///< N x D
+  std::vector<std::size_t> prototypeVoxels;
+  std::vector<LabelPixel> prototypeLabels;
+
+  std::size_t slotOf(LabelPixel label) const
+  {
+    return std::size_t(std::find(maps->tissues.begin(), maps->tissues.end(), label) - maps->tissues.begin());
+  }
+  float distance(std::size_t voxel, std::size_t slot) const { return signedDistances[voxel * T + slot]; }
+};
+
+/// The tissue maps given with the parameters (checked to be of these labels), else prepared here.
+std::shared_ptr<const PreoperativeTissueMaps> tissueMapsFor(const LabelImage& preopLabels, const TissueClassificationParameters& P)
+{
+  if (!P.preoperativeMaps) return preparePreoperativeTissueMaps(preopLabels);
+  if (P.preoperativeMaps->labels != &preopLabels || P.preoperativeMaps->voxels != preopLabels.GetBufferPointer()) {
     throw std::invalid_argument("classification: the preoperative tissue maps were prepared from other labels");
   }
-  const std::set<LabelPixel>& present = maps->present;
-  const std::vector<LabelPixel>& tissues = maps->tissues;
-  const std::vector<TissueDistance>& distances = maps->distances;
-  std::vector<DistanceSampler> samplers;
-  for (const auto& d : distances) samplers.emplace_back(*d.distance);
-  const std::size_t T = tissues.size();
-  const std::size_t D = 1 + T; // intensity, then one distance per tissue
+  return P.preoperativeMaps;
+}
 
-  // Where each intraoperative voxel lands in the preoperative frame: x = A (origin + M index) + t.
+/// The saturated signed distance to each preoperative tissue at every intraoperative voxel (where
+/// the rigid transform puts it in the preoperative frame: x = A (origin + M index) + t), and the head.
+void sampleAlignedDistances(ClassificationWork& w, const SpatialTransform& rigid)
+{
   const AffineParameters rigidParameters = affineParametersOf(&rigid);
-  const GridMap grid(intraop);
+  const GridMap grid(w.intraop);
   double A[3][3], b[3];
   for (int r = 0; r < 3; ++r) {
     b[r] = rigidParameters.translation[r];
@@ -592,183 +615,208 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
       b[r] += rigidParameters.matrix[r][c] * grid.origin[c];
     }
   }
-  auto preopPointOf = [&](std::size_t offset, double x[3]) {
-    const double i = double(offset % size[0]), j = double((offset / size[0]) % size[1]), k = double(offset / (size[0] * size[1]));
-    for (int r = 0; r < 3; ++r) x[r] = b[r] + A[r][0] * i + A[r][1] * j + A[r][2] * k;
-  };
-
-  // Signed distances on the intraoperative grid (saturated), and the head (not background).
-  std::vector<float> signedDistances(N * T);
-  std::vector<unsigned char> head(N);
+  std::vector<DistanceSampler> samplers;
+  for (const auto& d : w.maps->distances) samplers.emplace_back(*d.distance);
+  const auto size = w.size;
+  const std::size_t T = w.T;
+  w.signedDistances.assign(w.N * T, 0.0f);
+  w.head.assign(w.N, 0);
   const std::size_t backgroundSlot = 0; // tissues are sorted; 0 is background
-  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned) {
+  parallelRanges(w.N, [&](std::size_t begin, std::size_t end, unsigned) {
     double x[3];
     for (std::size_t i = begin; i < end; ++i) {
-      preopPointOf(i, x);
+      const double ii = double(i % size[0]), j = double((i / size[0]) % size[1]), k = double(i / (size[0] * size[1]));
+      for (int r = 0; r < 3; ++r) x[r] = b[r] + A[r][0] * ii + A[r][1] * j + A[r][2] * k;
       for (std::size_t t = 0; t < T; ++t) {
-        signedDistances[i * T + t] = std::clamp(samplers[t](x), float(-P.saturationMm), float(P.saturationMm));
+        w.signedDistances[i * T + t] = std::clamp(samplers[t](x), float(-w.P.saturationMm), float(w.P.saturationMm));
       }
-      head[i] = signedDistances[i * T + backgroundSlot] > 0.0f;
+      w.head[i] = w.signedDistances[i * T + backgroundSlot] > 0.0f;
     }
   });
+}
+
+/// The intensity channel (after N4 when asked) and the features. Features on fixed steps: the
+/// intensity to 0.1 of its 0-100 scale (a 12-bit scanner's resolution, far below the noise), the
+/// distances to 0.25 mm (the maps have 2 mm bins). Voxels then share features, and answers
+/// (AnswerCache): on the built-in case 83 % fewer k-NN queries (301,138 against 1,759,889) for the
+/// same labels (brain Dice against the truth 0.9810 both).
+void computeFeatures(ClassificationWork& w)
+{
   ScalarImage::Pointer corrected;
-  const ScalarImage* source = &intraop;
-  if (P.biasCorrection) {
-    corrected = biasCorrected(intraop, head);
+  const ScalarImage* source = &w.intraop;
+  if (w.P.biasCorrection) {
+    corrected = biasCorrected(w.intraop, w.head);
     source = corrected;
   }
-  const std::vector<float> intensity = normalizedIntensity(*source, head);
-  // Features on fixed steps: the intensity to 0.1 of its 0-100 scale (a 12-bit scanner's
-  // resolution, far below the noise), the distances to 0.25 mm (the maps have 2 mm bins). Voxels
-  // then share features, and answers (AnswerCache): on the built-in case 83 % fewer k-NN queries
-  // (301,138 against 1,759,889) for the same labels (brain Dice against the truth 0.9810 both).
-  std::vector<float> features(N * D);
-  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned) {
+  w.intensity = normalizedIntensity(*source, w.head);
+  const std::size_t T = w.T, D = w.D;
+  w.features.assign(w.N * D, 0.0f);
+  parallelRanges(w.N, [&](std::size_t begin, std::size_t end, unsigned) {
     for (std::size_t i = begin; i < end; ++i) {
-      features[i * D] = float(P.intensityWeight) * (std::round(intensity[i] * 10.0f) / 10.0f);
+      w.features[i * D] = float(w.P.intensityWeight) * (std::round(w.intensity[i] * 10.0f) / 10.0f);
       for (std::size_t t = 0; t < T; ++t) {
-        const float distance = std::round(std::max(0.0f, signedDistances[i * T + t]) * 4.0f) / 4.0f;
-        features[i * D + 1 + t] = float(P.spatialWeight) * distance;
+        const float distance = std::round(std::max(0.0f, w.signedDistances[i * T + t]) * 4.0f) / 4.0f;
+        w.features[i * D + 1 + t] = float(w.P.spatialWeight) * distance;
       }
     }
   });
+}
 
-  // Prototypes.
-  auto slotOf = [&](LabelPixel label) -> std::size_t {
-    return std::size_t(std::find(tissues.begin(), tissues.end(), label) - tissues.begin());
-  };
-  std::vector<std::size_t> prototypeVoxels;
-  std::vector<LabelPixel> prototypeLabels;
-  if (given) {
-    std::map<LabelPixel, unsigned> counts;
-    for (const TissuePrototype& p : *given) {
-      itk::Index<3> index;
-      if (!intraop.TransformPhysicalPointToIndex(p.position, index)) {
-        std::ostringstream message;
-        message << "classification: prototype '" << p.name << "' at (" << p.position[0] << ", " << p.position[1] << ", "
-                << p.position[2] << ") is outside the intraoperative image";
-        throw InputError(message.str());
-      }
-      if (!present.count(p.label)) {
-        throw InputError("classification: prototype '" + p.name + "' is " + tissueName(p.label) +
-                         ", a label the preoperative labels do not have");
-      }
-      prototypeVoxels.push_back(index[0] + size[0] * (index[1] + size[1] * index[2]));
-      prototypeLabels.push_back(p.label);
-      counts[p.label] += 1;
-      result.prototypes.push_back(p);
+/// The prototypes a user gave (positions on the intraoperative grid), at least k of each tissue.
+void takeGivenPrototypes(ClassificationWork& w, const std::vector<TissuePrototype>& given, TissueClassificationResult& result)
+{
+  std::map<LabelPixel, unsigned> counts;
+  for (const TissuePrototype& p : given) {
+    itk::Index<3> index;
+    if (!w.intraop.TransformPhysicalPointToIndex(p.position, index)) {
+      std::ostringstream message;
+      message << "classification: prototype '" << p.name << "' at (" << p.position[0] << ", " << p.position[1] << ", "
+              << p.position[2] << ") is outside the intraoperative image";
+      throw InputError(message.str());
     }
-    for (LabelPixel label : tissues) {
-      if (counts[label] < P.k) {
-        throw InputError("classification: " + std::to_string(counts[label]) + " prototypes of " + tissueName(label) +
-                         " (label " + std::to_string(label) + "); k = " + std::to_string(P.k) + " needs at least as many");
-      }
+    if (!w.maps->present.count(p.label)) {
+      throw InputError("classification: prototype '" + p.name + "' is " + tissueName(p.label) +
+                       ", a label the preoperative labels do not have");
     }
-  } else {
-    std::mt19937_64 rng(P.seed);
-    for (std::size_t t = 0; t < T; ++t) {
-      // Inside the aligned tissue by the erosion (or half its depth for thin tissues); on coarse
-      // grids, less deep until there are enough candidates.
-      std::vector<std::size_t> candidates;
-      for (double erosion = std::min(P.prototypeErosionMm, 0.5 * distances[t].deepestMm);; erosion *= 0.5) {
-        if (erosion < 0.25) erosion = 0.0;
-        candidates.clear();
-        for (std::size_t i = 0; i < N; ++i) {
-          if (signedDistances[i * T + t] <= -erosion && (erosion > 0 || signedDistances[i * T + t] < 0)) candidates.push_back(i);
-        }
-        if (candidates.size() >= 2 * P.prototypesPerClass || erosion == 0.0) break;
-      }
-      if (candidates.size() < 3 * std::size_t(P.k)) {
-        // A tissue thinner than the intraoperative voxels: its most interior voxels, up to 1 mm out.
-        candidates.clear();
-        std::vector<std::pair<float, std::size_t>> nearest;
-        for (std::size_t i = 0; i < N; ++i) {
-          if (signedDistances[i * T + t] < 1.0f) nearest.emplace_back(signedDistances[i * T + t], i);
-        }
-        const std::size_t want = std::min<std::size_t>(nearest.size(), 4 * std::size_t(P.k));
-        std::partial_sort(nearest.begin(), nearest.begin() + std::ptrdiff_t(want), nearest.end());
-        for (std::size_t n = 0; n < want; ++n) candidates.push_back(nearest[n].second);
-        result.warnings.push_back("classify: " + tissueName(tissues[t]) + " is thinner than the intraoperative voxels; " +
-                                  std::to_string(candidates.size()) + " prototypes from its most interior voxels");
-      }
-      std::shuffle(candidates.begin(), candidates.end(), rng);
-      candidates.resize(std::min<std::size_t>(candidates.size(), 4 * P.prototypesPerClass));
-      // What the rigid prior cannot know (tissue that moved) shows as intensity outliers.
-      std::vector<float> values;
-      for (std::size_t i : candidates) values.push_back(intensity[i]);
-      const double m = median(values);
-      std::vector<float> deviations;
-      for (float v : values) deviations.push_back(float(std::abs(v - m)));
-      const double spread = std::max(1.0, 1.4826 * median(deviations));
-      unsigned kept = 0;
-      for (std::size_t i : candidates) {
-        if (kept == P.prototypesPerClass) break;
-        if (std::abs(intensity[i] - m) > 3.0 * spread) continue;
-        prototypeVoxels.push_back(i);
-        prototypeLabels.push_back(tissues[t]);
-        ++kept;
-      }
-      if (kept < P.k) {
-        throw InputError("classification: only " + std::to_string(kept) + " prototypes of " + tissueName(tissues[t]) +
-                         " could be chosen (the tissue is too small after aligning); k = " + std::to_string(P.k));
-      }
-    }
-    for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) {
-      const std::size_t i = prototypeVoxels[p];
-      itk::Index<3> index{{itk::IndexValueType(i % size[0]), itk::IndexValueType((i / size[0]) % size[1]),
-                           itk::IndexValueType(i / (size[0] * size[1]))}};
-      TissuePrototype prototype;
-      prototype.label = prototypeLabels[p];
-      prototype.name = tissueName(prototype.label) + "-" + std::to_string(p + 1);
-      intraop.TransformIndexToPhysicalPoint(index, prototype.position);
-      result.prototypes.push_back(prototype);
+    w.prototypeVoxels.push_back(index[0] + w.size[0] * (index[1] + w.size[1] * index[2]));
+    w.prototypeLabels.push_back(p.label);
+    counts[p.label] += 1;
+    result.prototypes.push_back(p);
+  }
+  for (LabelPixel label : w.maps->tissues) {
+    if (counts[label] < w.P.k) {
+      throw InputError("classification: " + std::to_string(counts[label]) + " prototypes of " + tissueName(label) + " (label " +
+                       std::to_string(label) + "); k = " + std::to_string(w.P.k) + " needs at least as many");
     }
   }
+}
 
-  // A tumour that has been resected has its class dropped, and where it was, fluid is decided by
-  // the clean-up (decideTumourResection).
+/// Candidate voxels for the prototypes of tissue slot `t`: inside the aligned tissue by the
+/// erosion (or half its depth for thin tissues); on coarse grids, less deep until there are enough;
+/// for a tissue thinner than the voxels, its most interior voxels, up to 1 mm out (with a warning).
+std::vector<std::size_t> prototypeCandidates(const ClassificationWork& w, std::size_t t, TissueClassificationResult& result)
+{
+  std::vector<std::size_t> candidates;
+  for (double erosion = std::min(w.P.prototypeErosionMm, 0.5 * w.maps->distances[t].deepestMm);; erosion *= 0.5) {
+    if (erosion < 0.25) erosion = 0.0;
+    candidates.clear();
+    for (std::size_t i = 0; i < w.N; ++i) {
+      if (w.distance(i, t) <= -erosion && (erosion > 0 || w.distance(i, t) < 0)) candidates.push_back(i);
+    }
+    if (candidates.size() >= 2 * w.P.prototypesPerClass || erosion == 0.0) break;
+  }
+  if (candidates.size() < 3 * std::size_t(w.P.k)) {
+    candidates.clear();
+    std::vector<std::pair<float, std::size_t>> nearest;
+    for (std::size_t i = 0; i < w.N; ++i) {
+      if (w.distance(i, t) < 1.0f) nearest.emplace_back(w.distance(i, t), i);
+    }
+    const std::size_t want = std::min<std::size_t>(nearest.size(), 4 * std::size_t(w.P.k));
+    std::partial_sort(nearest.begin(), nearest.begin() + std::ptrdiff_t(want), nearest.end());
+    for (std::size_t n = 0; n < want; ++n) candidates.push_back(nearest[n].second);
+    result.warnings.push_back("classify: " + tissueName(w.maps->tissues[t]) + " is thinner than the intraoperative voxels; " +
+                              std::to_string(candidates.size()) + " prototypes from its most interior voxels");
+  }
+  return candidates;
+}
+
+/// Up to P.prototypesPerClass of the (shuffled) candidates, leaving out intensity outliers (more
+/// than 3 robust spreads from their median): what the rigid prior cannot know (tissue that moved).
+void keepTypicalCandidates(ClassificationWork& w, std::size_t t, std::vector<std::size_t> candidates, std::mt19937_64& rng)
+{
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  candidates.resize(std::min<std::size_t>(candidates.size(), 4 * w.P.prototypesPerClass));
+  std::vector<float> values;
+  for (std::size_t i : candidates) values.push_back(w.intensity[i]);
+  const double m = median(values);
+  std::vector<float> deviations;
+  for (float v : values) deviations.push_back(float(std::abs(v - m)));
+  const double spread = std::max(1.0, 1.4826 * median(deviations));
+  unsigned kept = 0;
+  for (std::size_t i : candidates) {
+    if (kept == w.P.prototypesPerClass) break;
+    if (std::abs(w.intensity[i] - m) > 3.0 * spread) continue;
+    w.prototypeVoxels.push_back(i);
+    w.prototypeLabels.push_back(w.maps->tissues[t]);
+    ++kept;
+  }
+  if (kept < w.P.k) {
+    throw InputError("classification: only " + std::to_string(kept) + " prototypes of " + tissueName(w.maps->tissues[t]) +
+                     " could be chosen (the tissue is too small after aligning); k = " + std::to_string(w.P.k));
+  }
+}
+
+/// Prototypes chosen from the aligned preoperative tissues (seeded), recorded with names and
+/// positions for the next scan.
+void choosePrototypes(ClassificationWork& w, TissueClassificationResult& result)
+{
+  std::mt19937_64 rng(w.P.seed);
+  for (std::size_t t = 0; t < w.T; ++t) keepTypicalCandidates(w, t, prototypeCandidates(w, t, result), rng);
+  for (std::size_t p = 0; p < w.prototypeVoxels.size(); ++p) {
+    const std::size_t i = w.prototypeVoxels[p];
+    itk::Index<3> index{{itk::IndexValueType(i % w.size[0]), itk::IndexValueType((i / w.size[0]) % w.size[1]),
+                         itk::IndexValueType(i / (w.size[0] * w.size[1]))}};
+    TissuePrototype prototype;
+    prototype.label = w.prototypeLabels[p];
+    prototype.name = tissueName(prototype.label) + "-" + std::to_string(p + 1);
+    w.intraop.TransformIndexToPhysicalPoint(index, prototype.position);
+    result.prototypes.push_back(prototype);
+  }
+}
+
+/// What the prototypes say of this scan: its contrast (every intensity rule below is stated
+/// through these medians) and whether the tumour was resected (decideTumourResection); then the
+/// prototypes the k-NN uses (a resected tumour's class dropped: where it was, fluid is decided by
+/// the clean-up).
+PrototypeCloud learnFromPrototypes(const ClassificationWork& w, TissueClassificationResult& result, std::vector<LabelPixel>& cloudLabels)
+{
   std::map<LabelPixel, std::vector<float>> prototypeIntensity;
-  for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) prototypeIntensity[prototypeLabels[p]].push_back(intensity[prototypeVoxels[p]]);
-  // What this scan's contrast is: every intensity rule below is stated through these medians.
+  for (std::size_t p = 0; p < w.prototypeVoxels.size(); ++p) {
+    prototypeIntensity[w.prototypeLabels[p]].push_back(w.intensity[w.prototypeVoxels[p]]);
+  }
   result.contrast = scanContrastOf(prototypeIntensity);
-  if (!present.count(Ventricles)) result.contrast.fluid = std::nan("");
-  if (present.count(Tumour)) {
-    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, result.contrast, P);
-    result.tumourResected = decideTumourResection(result.tumourEvidence, P.tumourResection);
+  if (!w.maps->present.count(Ventricles)) result.contrast.fluid = std::nan("");
+  if (w.maps->present.count(Tumour)) {
+    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, result.contrast, w.P);
+    result.tumourResected = decideTumourResection(result.tumourEvidence, w.P.tumourResection);
   }
   PrototypeCloud cloud;
-  cloud.dims = D;
-  std::vector<LabelPixel> cloudLabels;
-  for (std::size_t p = 0; p < prototypeVoxels.size(); ++p) {
-    if (result.tumourResected && prototypeLabels[p] == Tumour) continue;
-    cloud.features.insert(cloud.features.end(), features.begin() + std::ptrdiff_t(prototypeVoxels[p] * D),
-                          features.begin() + std::ptrdiff_t((prototypeVoxels[p] + 1) * D));
-    cloudLabels.push_back(prototypeLabels[p]);
-    result.prototypesPerClass[prototypeLabels[p]] += 1;
+  cloud.dims = w.D;
+  for (std::size_t p = 0; p < w.prototypeVoxels.size(); ++p) {
+    if (result.tumourResected && w.prototypeLabels[p] == Tumour) continue;
+    cloud.features.insert(cloud.features.end(), w.features.begin() + std::ptrdiff_t(w.prototypeVoxels[p] * w.D),
+                          w.features.begin() + std::ptrdiff_t((w.prototypeVoxels[p] + 1) * w.D));
+    cloudLabels.push_back(w.prototypeLabels[p]);
+    result.prototypesPerClass[w.prototypeLabels[p]] += 1;
   }
-  result.featureSeconds = secondsSince(start);
+  return cloud;
+}
 
-  // Exact k-NN (kd-tree), voxels with bit-identical features answered once.
-  throwIfCancelled(P.cancel, "tissue classification");
-  const auto knnStart = Clock::now();
+/// Exact k-NN (kd-tree) of every voxel among the prototypes, voxels with bit-identical features
+/// answered once; majority vote, a tie to the class of the nearest prototype among the tied.
+void labelByNearestPrototypes(const ClassificationWork& w, PrototypeCloud& cloud, const std::vector<LabelPixel>& cloudLabels,
+                              TissueClassificationResult& result)
+{
+  throwIfCancelled(w.P.cancel, "tissue classification");
+  const std::size_t D = w.D;
   KdTree tree(D, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(12));
   tree.buildIndex();
   result.labels = LabelImage::New();
-  result.labels->CopyInformation(&intraop);
-  result.labels->SetRegions(intraop.GetLargestPossibleRegion());
+  result.labels->CopyInformation(&w.intraop);
+  result.labels->SetRegions(w.intraop.GetLargestPossibleRegion());
   result.labels->Allocate();
   LabelPixel* out = result.labels->GetBufferPointer();
-  const unsigned k = P.k;
+  const unsigned k = w.P.k;
   std::vector<std::size_t> queriesPerThread(16, 0);
-  parallelRanges(N, [&](std::size_t begin, std::size_t end, unsigned thread) {
-    AnswerCache cache(features.data(), D);
+  parallelRanges(w.N, [&](std::size_t begin, std::size_t end, unsigned thread) {
+    AnswerCache cache(w.features.data(), D);
     std::vector<std::size_t> neighbours(k);
     std::vector<float> squaredDistances(k);
     std::map<LabelPixel, unsigned> tally;
     std::size_t queries = 0;
     for (std::size_t i = begin; i < end; ++i) {
-      if ((i & 0xffff) == 0 && P.cancel && P.cancel->load(std::memory_order_relaxed)) break; // thrown below
-      const float* f = &features[i * D];
+      if ((i & 0xffff) == 0 && w.P.cancel && w.P.cancel->load(std::memory_order_relaxed)) break; // thrown below
+      const float* f = &w.features[i * D];
       const std::uint64_t hash = AnswerCache::hashOf(f, D);
       const int known = cache.find(i, hash);
       if (known >= 0) {
@@ -779,7 +827,6 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
       nanoflann::KNNResultSet<float, std::size_t> found(k);
       found.init(neighbours.data(), squaredDistances.data());
       tree.findNeighbors(found, f, nanoflann::SearchParams(32, 0.0f, true));
-      // Majority vote; a tie goes to the class of the nearest prototype among the tied.
       tally.clear();
       unsigned best = 0;
       for (std::size_t n = 0; n < found.size(); ++n) best = std::max(best, ++tally[cloudLabels[neighbours[n]]]);
@@ -795,135 +842,207 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
     }
     queriesPerThread[thread] = queries;
   });
-  throwIfCancelled(P.cancel, "tissue classification");
+  throwIfCancelled(w.P.cancel, "tissue classification");
   for (std::size_t q : queriesPerThread) result.knnQueries += q;
-  result.knnSeconds = secondsSince(knnStart);
+}
 
-  // Clean-up of the brain.
-  throwIfCancelled(P.cancel, "tissue classification");
-  const auto cleanupStart = Clock::now();
-  auto isBrain = [](LabelPixel l) { return l == Parenchyma || l == Ventricles || l == Tumour; };
-  if (present.count(Ventricles)) {
-    // Thick fluid (or air) in the brain: ventricles where the aligned ventricles are, else a gap or
-    // cavity. Fluid or air is what looks more like this scan's fluid or background than like its
-    // parenchyma (in T1, darker than halfway from the fluid to the parenchyma, as it always was; in
-    // T2 the bright fluid and the dark air both).
-    const ScanContrast& contrast = result.contrast;
-    auto fluid = MaskImage::New();
-    fluid->CopyInformation(&intraop);
-    fluid->SetRegions(intraop.GetLargestPossibleRegion());
-    fluid->Allocate();
-    // A tumour that is still there is tissue, however dark its core: what the k-NN calls tumour
-    // stays out of the fluid unless it looks more like fluid or air than the tumour did before
-    // surgery (tumourLooksLikeFluid): the fluid of a gap or a cavity the k-NN gave to a tumour
-    // wrongly kept (its cavity moved away from the rigid prior) is fluid.
-    const bool tumourPresent = present.count(Tumour) && !result.tumourResected;
-    const TumourResectionEvidence& evidence = result.tumourEvidence;
-    // Its thickness is measured over what the k-NN or the aligned preoperative brain calls brain:
-    // the gap the brain sank away from lies inside the aligned brain, and the k-NN gives its
-    // shallow part (within the spatial channels' saturation of the aligned surface) to the head,
-    // so the brain-labelled rest of it is a sheet too thin to count as thick, and stays brain.
-    // Not where the fluid is brighter than the parenchyma (T2): there what the k-NN gives to the
-    // head inside the aligned brain is mostly bright cortex (partial volume with its CSF), and
-    // counted as fluid it made thick bodies of the cortex (rf10-t2: 16 ml of parenchyma lost).
-    const bool alignedBrainToo = P.fluidThicknessInAlignedBrain && !contrast.fluidBrighterThanParenchyma();
-    const std::vector<std::size_t> brainSlots = {slotOf(Parenchyma), slotOf(Ventricles), slotOf(Tumour)};
-    auto inAlignedBrain = [&](std::size_t i) {
-      for (std::size_t slot : brainSlots) {
-        if (slot < T && signedDistances[i * T + slot] <= 0.0f) return true;
-      }
-      return false;
-    };
-    for (std::size_t i = 0; i < N; ++i) {
-      const bool candidate = isBrain(out[i]) || (alignedBrainToo && inAlignedBrain(i));
-      const bool tumourTissue = tumourPresent && out[i] == Tumour &&
-                                !(P.tumourFluidByLook && tumourLooksLikeFluid(evidence, intensity[i]));
-      fluid->GetBufferPointer()[i] = candidate && contrast.looksLikeFluidOrAir(intensity[i]) && !tumourTissue;
+bool isBrainLabel(LabelPixel l)
+{
+  return l == Parenchyma || l == Ventricles || l == Tumour;
+}
+
+MaskImage::Pointer maskOnGrid(const ScalarImage& grid)
+{
+  auto mask = MaskImage::New();
+  mask->CopyInformation(&grid);
+  mask->SetRegions(grid.GetLargestPossibleRegion());
+  mask->Allocate();
+  return mask;
+}
+
+/// Fluid (or air) in the brain: what looks more like this scan's fluid or background than like its
+/// parenchyma (in T1, darker than halfway from the fluid to the parenchyma, as it always was; in
+/// T2 the bright fluid and the dark air both).
+///
+/// A tumour that is still there is tissue, however dark its core: what the k-NN calls tumour
+/// stays out of the fluid unless it looks more like fluid or air than the tumour did before
+/// surgery (tumourLooksLikeFluid): the fluid of a gap or a cavity the k-NN gave to a tumour
+/// wrongly kept (its cavity moved away from the rigid prior) is fluid.
+///
+/// Its thickness is measured over what the k-NN or the aligned preoperative brain calls brain:
+/// the gap the brain sank away from lies inside the aligned brain, and the k-NN gives its
+/// shallow part (within the spatial channels' saturation of the aligned surface) to the head,
+/// so the brain-labelled rest of it is a sheet too thin to count as thick, and stays brain.
+/// Not where the fluid is brighter than the parenchyma (T2): there what the k-NN gives to the
+/// head inside the aligned brain is mostly bright cortex (partial volume with its CSF), and
+/// counted as fluid it made thick bodies of the cortex (rf10-t2: 16 ml of parenchyma lost).
+MaskImage::Pointer fluidInBrain(const ClassificationWork& w, const TissueClassificationResult& result, const LabelPixel* out)
+{
+  const ScanContrast& contrast = result.contrast;
+  MaskImage::Pointer fluid = maskOnGrid(w.intraop);
+  const bool tumourPresent = w.maps->present.count(Tumour) && !result.tumourResected;
+  const TumourResectionEvidence& evidence = result.tumourEvidence;
+  const bool alignedBrainToo = w.P.fluidThicknessInAlignedBrain && !contrast.fluidBrighterThanParenchyma();
+  const std::vector<std::size_t> brainSlots = {w.slotOf(Parenchyma), w.slotOf(Ventricles), w.slotOf(Tumour)};
+  auto inAlignedBrain = [&](std::size_t i) {
+    for (std::size_t slot : brainSlots) {
+      if (slot < w.T && w.distance(i, slot) <= 0.0f) return true;
     }
-    ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
-    auto core = MaskImage::New();
-    core->CopyInformation(fluid);
-    core->SetRegions(fluid->GetLargestPossibleRegion());
-    core->Allocate();
-    for (std::size_t i = 0; i < N; ++i) core->GetBufferPointer()[i] = toFluid->GetBufferPointer()[i] <= -P.fluidOpeningMm;
-    ScalarImage::Pointer toCore = signedDistanceMm(core);
-    auto thick = MaskImage::New();
-    thick->CopyInformation(fluid);
-    thick->SetRegions(fluid->GetLargestPossibleRegion());
-    thick->Allocate();
-    for (std::size_t i = 0; i < N; ++i) {
-      thick->GetBufferPointer()[i] = fluid->GetBufferPointer()[i] && toCore->GetBufferPointer()[i] <= P.fluidOpeningMm + 1e-3;
-    }
-    auto labelled = components<unsigned>(thick, false);
-    const unsigned* component = labelled->GetBufferPointer();
-    std::map<unsigned, std::pair<std::size_t, std::size_t>> overlap; // component -> (in ventricles, all)
-    const std::size_t ventricleSlot = slotOf(Ventricles);
-    for (std::size_t i = 0; i < N; ++i) {
-      if (!component[i]) continue;
-      auto& o = overlap[component[i]];
-      o.second += 1;
-      o.first += signedDistances[i * T + ventricleSlot] <= 2.0f;
-    }
-    for (std::size_t i = 0; i < N; ++i) {
-      if (component[i]) {
-        if (!isBrain(out[i])) continue; // the head's or background's own voxels keep their label
-        const auto& o = overlap[component[i]];
-        out[i] = double(o.first) >= 0.3 * double(o.second) ? Ventricles : Background;
-      } else if (out[i] == Ventricles && signedDistances[i * T + ventricleSlot] > 0.5f * float(P.saturationMm)) {
-        out[i] = Parenchyma; // thin fluid far from the ventricles: a sulcus, part of the parenchyma
-      }
+    return false;
+  };
+  for (std::size_t i = 0; i < w.N; ++i) {
+    const bool candidate = isBrainLabel(out[i]) || (alignedBrainToo && inAlignedBrain(i));
+    const bool tumourTissue = tumourPresent && out[i] == Tumour &&
+                              !(w.P.tumourFluidByLook && tumourLooksLikeFluid(evidence, w.intensity[i]));
+    fluid->GetBufferPointer()[i] = candidate && contrast.looksLikeFluidOrAir(w.intensity[i]) && !tumourTissue;
+  }
+  return fluid;
+}
+
+/// The part of `fluid` thicker than P.fluidOpeningMm (a morphological opening by distance maps).
+MaskImage::Pointer thickPartOf(const ClassificationWork& w, const MaskImage::Pointer& fluid)
+{
+  ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
+  auto core = MaskImage::New();
+  core->CopyInformation(fluid);
+  core->SetRegions(fluid->GetLargestPossibleRegion());
+  core->Allocate();
+  for (std::size_t i = 0; i < w.N; ++i) core->GetBufferPointer()[i] = toFluid->GetBufferPointer()[i] <= -w.P.fluidOpeningMm;
+  ScalarImage::Pointer toCore = signedDistanceMm(core);
+  auto thick = MaskImage::New();
+  thick->CopyInformation(fluid);
+  thick->SetRegions(fluid->GetLargestPossibleRegion());
+  thick->Allocate();
+  for (std::size_t i = 0; i < w.N; ++i) {
+    thick->GetBufferPointer()[i] = fluid->GetBufferPointer()[i] && toCore->GetBufferPointer()[i] <= w.P.fluidOpeningMm + 1e-3;
+  }
+  return thick;
+}
+
+/// Thick fluid (or air) in the brain: ventricles where the aligned ventricles are (30 % of a body
+/// within 2 mm of them), else a gap or cavity (background). Thin fluid far from the ventricles is a
+/// sulcus, part of the parenchyma.
+void separateThickFluid(const ClassificationWork& w, const TissueClassificationResult& result, LabelPixel* out)
+{
+  auto labelled = components<unsigned>(thickPartOf(w, fluidInBrain(w, result, out)), false);
+  const unsigned* component = labelled->GetBufferPointer();
+  std::map<unsigned, std::pair<std::size_t, std::size_t>> overlap; // component -> (in ventricles, all)
+  const std::size_t ventricleSlot = w.slotOf(Ventricles);
+  for (std::size_t i = 0; i < w.N; ++i) {
+    if (!component[i]) continue;
+    auto& o = overlap[component[i]];
+    o.second += 1;
+    o.first += w.distance(i, ventricleSlot) <= 2.0f;
+  }
+  for (std::size_t i = 0; i < w.N; ++i) {
+    if (component[i]) {
+      if (!isBrainLabel(out[i])) continue; // the head's or background's own voxels keep their label
+      const auto& o = overlap[component[i]];
+      out[i] = double(o.first) >= 0.3 * double(o.second) ? Ventricles : Background;
+    } else if (out[i] == Ventricles && w.distance(i, ventricleSlot) > 0.5f * float(w.P.saturationMm)) {
+      out[i] = Parenchyma;
     }
   }
+}
+
+/// The brain is one piece: brain voxels outside its largest component become head. Returns the brain.
+MaskImage::Pointer keepLargestBrainComponent(const ClassificationWork& w, LabelPixel* out)
+{
+  MaskImage::Pointer brain = maskOnGrid(w.intraop);
+  for (std::size_t i = 0; i < w.N; ++i) brain->GetBufferPointer()[i] = isBrainLabel(out[i]);
+  auto largest = components<unsigned>(brain, true);
+  for (std::size_t i = 0; i < w.N; ++i) {
+    if (isBrainLabel(out[i]) && largest->GetBufferPointer()[i] != 1) {
+      out[i] = Head;
+      brain->GetBufferPointer()[i] = 0;
+    }
+  }
+  return brain;
+}
+
+/// Holes in the brain smaller than P.smallHoleMl (not touching the grid's border) are filled with
+/// parenchyma; the cavity and the gap are larger.
+void fillSmallHoles(const ClassificationWork& w, const MaskImage::Pointer& brain, LabelPixel* out)
+{
+  auto outside = MaskImage::New();
+  outside->CopyInformation(brain);
+  outside->SetRegions(brain->GetLargestPossibleRegion());
+  outside->Allocate();
+  for (std::size_t i = 0; i < w.N; ++i) outside->GetBufferPointer()[i] = !brain->GetBufferPointer()[i];
+  auto holes = components<unsigned>(outside, false);
+  const unsigned* h = holes->GetBufferPointer();
+  std::map<unsigned, std::size_t> volume;
+  std::set<unsigned> touchesBorder;
+  const auto size = w.size;
+  for (std::size_t i = 0; i < w.N; ++i) {
+    if (!h[i]) continue;
+    volume[h[i]] += 1;
+    const std::size_t x = i % size[0], y = (i / size[0]) % size[1], z = i / (size[0] * size[1]);
+    if (x == 0 || y == 0 || z == 0 || x + 1 == size[0] || y + 1 == size[1] || z + 1 == size[2]) touchesBorder.insert(h[i]);
+  }
+  const double voxelMl = w.intraop.GetSpacing()[0] * w.intraop.GetSpacing()[1] * w.intraop.GetSpacing()[2] / 1000.0;
+  for (std::size_t i = 0; i < w.N; ++i) {
+    if (h[i] && !touchesBorder.count(h[i]) && double(volume[h[i]]) * voxelMl < w.P.smallHoleMl) out[i] = Parenchyma;
+  }
+}
+
+/// Clean-up of the k-NN's brain: thick fluid separated, a resected tumour's voxels to the
+/// background, one piece, small holes filled.
+void cleanUpBrain(const ClassificationWork& w, TissueClassificationResult& result)
+{
+  throwIfCancelled(w.P.cancel, "tissue classification");
+  LabelPixel* out = result.labels->GetBufferPointer();
+  if (w.maps->present.count(Ventricles)) separateThickFluid(w, result, out);
   if (result.tumourResected) {
-    for (std::size_t i = 0; i < N; ++i) {
+    for (std::size_t i = 0; i < w.N; ++i) {
       if (out[i] == Tumour) out[i] = Background;
     }
   }
-  // The brain is one piece; small holes in it are filled, the cavity and the gap are not.
-  auto brain = MaskImage::New();
-  brain->CopyInformation(&intraop);
-  brain->SetRegions(intraop.GetLargestPossibleRegion());
-  brain->Allocate();
-  for (std::size_t i = 0; i < N; ++i) brain->GetBufferPointer()[i] = isBrain(out[i]);
-  {
-    auto largest = components<unsigned>(brain, true);
-    for (std::size_t i = 0; i < N; ++i) {
-      if (isBrain(out[i]) && largest->GetBufferPointer()[i] != 1) {
-        out[i] = Head;
-        brain->GetBufferPointer()[i] = 0;
-      }
-    }
+  fillSmallHoles(w, keepLargestBrainComponent(w, out), out);
+}
+
+void warnOfResectionByImage(TissueClassificationResult& result)
+{
+  if (!result.tumourResected || result.tumourEvidence.decidedBy != "image") return;
+  std::ostringstream w;
+  w.precision(2);
+  w << "classify: the tumour looks resected (" << std::lround(100 * result.tumourEvidence.fluidLikeShare)
+    << " % of its prototypes look like fluid, " << std::lround(100 * result.tumourEvidence.tumourLikeShare)
+    << " % like the tumour before surgery); --tumour-resected no if it is not";
+  result.warnings.push_back(w.str());
+}
+
+} // namespace
+
+TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
+                                           const SpatialTransform& rigid,
+                                           const std::optional<std::vector<TissuePrototype>>& given,
+                                           const TissueClassificationParameters& P)
+{
+  P.validate();
+  TissueClassificationResult result;
+  const auto start = Clock::now();
+  ClassificationWork work(intraop, P, tissueMapsFor(preopLabels, P));
+  result.voxels = work.N;
+  sampleAlignedDistances(work, rigid);
+  computeFeatures(work);
+  if (given) {
+    takeGivenPrototypes(work, *given, result);
+  } else {
+    choosePrototypes(work, result);
   }
-  {
-    auto outside = MaskImage::New();
-    outside->CopyInformation(brain);
-    outside->SetRegions(brain->GetLargestPossibleRegion());
-    outside->Allocate();
-    for (std::size_t i = 0; i < N; ++i) outside->GetBufferPointer()[i] = !brain->GetBufferPointer()[i];
-    auto holes = components<unsigned>(outside, false);
-    const unsigned* h = holes->GetBufferPointer();
-    std::map<unsigned, std::size_t> volume;
-    std::set<unsigned> touchesBorder;
-    for (std::size_t i = 0; i < N; ++i) {
-      if (!h[i]) continue;
-      volume[h[i]] += 1;
-      const std::size_t x = i % size[0], y = (i / size[0]) % size[1], z = i / (size[0] * size[1]);
-      if (x == 0 || y == 0 || z == 0 || x + 1 == size[0] || y + 1 == size[1] || z + 1 == size[2]) touchesBorder.insert(h[i]);
-    }
-    const double voxelMl = intraop.GetSpacing()[0] * intraop.GetSpacing()[1] * intraop.GetSpacing()[2] / 1000.0;
-    for (std::size_t i = 0; i < N; ++i) {
-      if (h[i] && !touchesBorder.count(h[i]) && double(volume[h[i]]) * voxelMl < P.smallHoleMl) out[i] = Parenchyma;
-    }
-  }
+  std::vector<LabelPixel> cloudLabels;
+  PrototypeCloud cloud = learnFromPrototypes(work, result, cloudLabels);
+  result.featureSeconds = secondsSince(start);
+
+  const auto knnStart = Clock::now();
+  labelByNearestPrototypes(work, cloud, cloudLabels, result);
+  result.knnSeconds = secondsSince(knnStart);
+
+  const auto cleanupStart = Clock::now();
+  cleanUpBrain(work, result);
   result.cleanupSeconds = secondsSince(cleanupStart);
-  if (result.tumourResected && result.tumourEvidence.decidedBy == "image") {
-    std::ostringstream w;
-    w.precision(2);
-    w << "classify: the tumour looks resected (" << std::lround(100 * result.tumourEvidence.fluidLikeShare)
-      << " % of its prototypes look like fluid, " << std::lround(100 * result.tumourEvidence.tumourLikeShare)
-      << " % like the tumour before surgery); --tumour-resected no if it is not";
-    result.warnings.push_back(w.str());
-  }
+  warnOfResectionByImage(result);
   return result;
 }
 
