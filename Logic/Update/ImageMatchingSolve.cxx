@@ -84,7 +84,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
   const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm"), labelsFile = context.output("intraop_labels.nii.gz");
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
-  const LabelImage::Pointer intraopLabels = readLabelVolume(labelsFile);
+  const LabelImage::Pointer intraopLabels = context.products().readLabelVolume(labelsFile);
   ImageDrivenSolveInputs inputs;
   inputs.preopImage = &context.preopImage("simulate");
   inputs.preopLabels = &context.preopLabels("simulate");

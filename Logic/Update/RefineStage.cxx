@@ -27,9 +27,9 @@ namespace fs = std::filesystem;
 namespace {
 
 /// The imposed displacement of each mesh node on the brain surface file (model frame, mm).
-std::map<vtkIdType, std::array<double, 3>> imposedDisplacements(const fs::path& surfaceFile)
+std::map<vtkIdType, std::array<double, 3>> imposedDisplacements(RunContext& context, const fs::path& surfaceFile)
 {
-  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(context.products().readModel(surfaceFile));
   if (!surface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   vtkDataArray* displacement = surface->GetPointData()->GetArray("Displacement");
   vtkDataArray* node = surface->GetPointData()->GetArray("MeshNodeId");
@@ -85,7 +85,7 @@ constexpr double MovedMm = 1.0;
 WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
 {
   const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
   if (!mesh->GetPointData()->GetArray("Displacement")) {
     throw InputError(meshFile.string() + ": no Displacement; run `brainshift simulate` on this output folder first");
@@ -128,7 +128,7 @@ void runRefineStage(RunContext& context)
     }
   }
   // The first classification (through the rigid prior) stays where the solve moved nothing.
-  const LabelImage::Pointer anchor = readLabelVolume(context.output("intraop_labels.nii.gz"));
+  const LabelImage::Pointer anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
   // What the first pass did once for the whole scan stays said in its stages' entries.
   const nlohmann::json firstSurface = context.report().hasStage("surface") ? context.report().stage("surface") : nlohmann::json::object();
   const nlohmann::json firstSimulate = context.report().hasStage("simulate") ? context.report().stage("simulate") : nlohmann::json::object();
@@ -150,7 +150,7 @@ void runRefineStage(RunContext& context)
   try {
     for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
       Stopwatch passClock;
-      const auto before = imposedDisplacements(context.output("brain_surface.vtp"));
+      const auto before = imposedDisplacements(context, context.output("brain_surface.vtp"));
       const WarpedPrior prior = labelsWarpedBySolve(context, configuration.classificationRefinementReachMm);
       context.setWarpedPrior(prior.labels, int(pass), configuration.classificationRefinementReachMm > 0 ? prior.moved : nullptr, anchor,
                              firstTumourDecision);
@@ -159,7 +159,7 @@ void runRefineStage(RunContext& context)
       runSurfaceStage(context);
       runSimulateStage(context);
       keepFirstPassFacts();
-      const DisplacementChange change = changeBetween(before, imposedDisplacements(context.output("brain_surface.vtp")));
+      const DisplacementChange change = changeBetween(before, imposedDisplacements(context, context.output("brain_surface.vtp")));
       settled = change.meanMm < tolerance;
       const nlohmann::json& classify = context.report().stage("classify");
       passes.push_back({{"pass", pass},

@@ -243,7 +243,7 @@ void runClassifyStage(RunContext& context)
   const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
                                    ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
                                    : 0;
-  writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
+  context.products().writeLabelVolume(result.labels, context.output("intraop_labels.nii.gz"));
   // Recorded for the next scan of the same case (intraoperative scanner frame).
   writePrototypes(result.prototypes, context.output("classification_prototypes.json"));
   nlohmann::json perClass = nlohmann::json::object();
@@ -369,9 +369,9 @@ void runSimulateStage(RunContext& context)
 {
   Stopwatch clock;
   const fs::path meshFile = context.output("mesh.vtu"), surfaceFile = context.output("brain_surface.vtp");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(context.products().readModel(surfaceFile));
   if (!surface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   const Configuration& configuration = context.configuration();
   const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, configuration, meshFile.string(), surfaceFile.string());
@@ -408,7 +408,7 @@ void runSimulateStage(RunContext& context)
   }
   attachDisplacements(mesh, result);
   attachUncertainty(mesh, job, result, evidence);
-  writeModel(mesh, meshFile);
+  context.products().writeModel(mesh, meshFile);
   context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},
                                          {"served", served},
                                          {"worker_prepared", prepared},
@@ -441,7 +441,7 @@ void preparePreoperativeSurface(RunContext& context)
 {
   Stopwatch clock;
   const fs::path meshFile = context.output("mesh.vtu");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
   const LabelImage& labels = context.preopLabels("prepare");
   const auto identity = itk::Euler3DTransform<double>::New();
@@ -451,7 +451,7 @@ void preparePreoperativeSurface(RunContext& context)
   names.rigid = "the identity";
   const ActiveSurfaceResult result =
     deformBrainSurface(mesh, &labels, labels, &context.preopImage("prepare"), *identity, activeSurfaceParametersFrom(context), names, nullptr);
-  writeModel(result.surface, context.output("brain_surface.vtp"));
+  context.products().writeModel(result.surface, context.output("brain_surface.vtp"));
   context.report().setStage("preoperative_surface", {{"wall_seconds", clock.seconds()},
                                                      {"surface_nodes", result.surfaceNodes},
                                                      {"imposed_nodes", result.imposedNodes},
@@ -466,8 +466,8 @@ void prepareServedWorker(RunContext& context)
   Stopwatch clock;
   if (!context.session()) throw std::logic_error("prepareServedWorker: not in a session");
   const fs::path meshFile = context.output("mesh.vtu"), surfaceFile = context.output("brain_surface.vtp");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
-  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
+  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(context.products().readModel(surfaceFile));
   if (!mesh || !surface) throw InputError(context.output("").string() + ": the prepared mesh or surface cannot be read");
   const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, context.configuration(), meshFile.string(), surfaceFile.string());
   const WorkerOptions worker(context, "prepare");
@@ -538,11 +538,11 @@ void runMeshStage(RunContext& context)
     }
   }
   if (sameSettings) {
-    vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(*previousMesh));
+    vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(*previousMesh));
     if (!mesh) throw InputError(previousMesh->string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
     mesh->GetPointData()->RemoveArray("Displacement"); // the previous scan's solution
     mesh->GetPointData()->RemoveArray("DisplacementMagnitude");
-    writeModel(mesh, context.output("mesh.vtu"));
+    context.products().writeModel(mesh, context.output("mesh.vtu"));
     nlohmann::json entry = *before;
     entry["wall_seconds"] = clock.seconds();
     entry["reused_from"] = previousMesh->string();
@@ -551,7 +551,7 @@ void runMeshStage(RunContext& context)
     return;
   }
   const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
-  writeModel(result.mesh, context.output("mesh.vtu"));
+  context.products().writeModel(result.mesh, context.output("mesh.vtu"));
   const MeshQuality& q = result.quality;
   nlohmann::json volumes = nlohmann::json::object(), voxels = nlohmann::json::object();
   for (const auto& [label, ml] : q.meshVolumeMl) {
@@ -613,11 +613,11 @@ void runSurfaceStage(RunContext& context)
                        "` on this output folder first");
     }
   }
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
-  const LabelImage::Pointer labels = readLabelVolume(labelsFile);
+  const LabelImage::Pointer labels = context.products().readLabelVolume(labelsFile);
   const ActiveSurfaceParameters parameters = activeSurfaceParametersFrom(context);
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
@@ -630,14 +630,14 @@ void runSurfaceStage(RunContext& context)
   const bool samePass = context.warpedPrior() != nullptr; // refine: this scan's own surface, same mesh
   if (samePass) previousSurfaceFile = context.output("brain_surface.vtp");
   if (previousSurfaceFile && (samePass || (context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")))) {
-    previousSurface = vtkPolyData::SafeDownCast(readModel(*previousSurfaceFile));
+    previousSurface = vtkPolyData::SafeDownCast(context.products().readModel(*previousSurfaceFile));
     if (!previousSurface) throw InputError(previousSurfaceFile->string() + ": not a surface (vtkPolyData)");
     if (!previousSurface->GetPointData()->GetArray("PreopBoundary")) previousSurface = nullptr; // an older run's: fit again
     names.previousSurface = previousSurfaceFile->string();
   }
   const ActiveSurfaceResult result = deformBrainSurface(mesh, &context.preopLabels("surface"), *labels,
                                                         &context.intraopImage("surface"), *rigid, parameters, names, previousSurface);
-  writeModel(result.surface, context.output("brain_surface.vtp"));
+  context.products().writeModel(result.surface, context.output("brain_surface.vtp"));
   context.report().setStage("surface", {{"wall_seconds", clock.seconds()},
                                         {"surface_nodes", result.surfaceNodes},
                                         {"imposed_nodes", result.imposedNodes},
@@ -778,7 +778,7 @@ LabelImage::Pointer intraopLabelsIfWritten(RunContext& context, const ScalarImag
   const fs::path file = context.output("intraop_labels.nii.gz");
   std::error_code ec;
   if (!fs::exists(file, ec)) return nullptr;
-  LabelImage::Pointer labels = readLabelVolume(file);
+  LabelImage::Pointer labels = context.products().readLabelVolume(file);
   if (!ImageGeometry::of(labels.GetPointer()).sameGridAs(ImageGeometry::of(&intraop))) {
     throw InputError(file.string() + ": not on the intraoperative image's grid (" + ImageGeometry::of(labels.GetPointer()).describe() +
                      ", expected " + ImageGeometry::of(&intraop).describe() + ")");
@@ -914,7 +914,7 @@ void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer
   }
   volumesWritten.get();
   const fs::path surfaceFile = context.output("brain_surface.vtp");
-  vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+  vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(context.products().readModel(surfaceFile));
   if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
   writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, composite, brainSurface, rigidFallback);
 }
@@ -967,7 +967,7 @@ void runWarpStage(RunContext& context)
       throw InputError(needed.string() + ": not found; run `brainshift " + stage + "` on this output folder first");
     }
   }
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(readModel(meshFile));
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");

@@ -13,6 +13,7 @@
 #include "TissueClassificationLogic.h"
 #include "RegistrationInputs.h"
 #include "RunReport.h"
+#include "StageProducts.h"
 
 #include <atomic>
 #include <filesystem>
@@ -94,6 +95,8 @@ public:
   const Configuration& configuration() const { return configuration_; }
   RunReport& report() { return report_; }
   std::filesystem::path output(const std::string& fileName) const { return options_.outputDir / fileName; }
+  /// What the stages of this run wrote, kept for the later ones (StageProducts: the data bus).
+  StageProducts& products() { return products_; }
 
   /// Reads and checks every input given at once (`register` does this first).
   void loadAllInputs();
@@ -161,6 +164,7 @@ private:
   MaskImage::Pointer movedByPrior_;
   LabelImage::Pointer anchorLabels_;
   std::optional<bool> firstTumourDecision_;
+  StageProducts products_;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
