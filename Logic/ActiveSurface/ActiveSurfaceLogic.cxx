@@ -817,221 +817,275 @@ void ActiveSurfaceParameters::validate() const
   require(!brainLabels.empty(), "no brain labels");
 }
 
-ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
-                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
-                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
-                                       vtkPolyData* previousSurface)
-{
-  p.validate();
-  ActiveSurfaceResult result;
-  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError(names.rigid + ": the rigid transform is not linear");
-  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
-  if (intraopImage && !grid.sameGridAs(ImageGeometry::of(intraopImage))) {
-    throw InputError(names.labels + ": not on the intraoperative image's grid (" + grid.describe() + " against " +
-                     ImageGeometry::of(intraopImage).describe() + ")");
-  }
-  vtkDataArray* cellLabels = mesh->GetCellData()->GetArray("Label");
-  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+namespace {
 
-  // -- The preoperative brain surface, and what is known of its nodes.
-  std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
-  std::map<int, double> meshVolumeMl;
+/// What the stage needs of the preoperative mesh: each label's volume (ml), the tumour's nodes and
+/// the brain labels it holds.
+struct MeshContents {
+  std::map<int, double> volumeMl;
   std::set<vtkIdType> tumourNodes;
-  {
-    vtkNew<vtkIdList> ids;
-    for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
-      const int label = int(std::lround(cellLabels->GetComponent(c, 0)));
-      mesh->GetCellPoints(c, ids);
-      if (ids->GetNumberOfIds() != 4) throw InputError(names.mesh + ": cell " + std::to_string(c) + " is not a tetrahedron");
-      double q[4][3];
-      for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v]);
-      Vec a(q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]), b(q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]),
-        e(q[3][0] - q[0][0], q[3][1] - q[0][1], q[3][2] - q[0][2]);
-      meshVolumeMl[label] += std::abs(a.dot(b.cross(e))) / 6000.0;
-      if (label == p.tumourLabel) {
-        for (vtkIdType v = 0; v < 4; ++v) tumourNodes.insert(ids->GetId(v));
-      }
-    }
-  }
   std::set<int> meshedBrain;
+};
+
+MeshContents meshContentsOf(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const std::set<int>& brain,
+                            const ActiveSurfaceParameters& p, const std::string& meshName)
+{
+  MeshContents contents;
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    const int label = int(std::lround(cellLabels->GetComponent(c, 0)));
+    mesh->GetCellPoints(c, ids);
+    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
+    double q[4][3];
+    for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v]);
+    Vec a(q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]), b(q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]),
+      e(q[3][0] - q[0][0], q[3][1] - q[0][1], q[3][2] - q[0][2]);
+    contents.volumeMl[label] += std::abs(a.dot(b.cross(e))) / 6000.0;
+    if (label == p.tumourLabel) {
+      for (vtkIdType v = 0; v < 4; ++v) contents.tumourNodes.insert(ids->GetId(v));
+    }
+  }
   for (int l : brain) {
-    if (meshVolumeMl.count(l)) meshedBrain.insert(l);
+    if (contents.volumeMl.count(l)) contents.meshedBrain.insert(l);
   }
-  if (meshedBrain.empty()) throw InputError(names.mesh + ": the mesh holds none of the brain labels (2, 3, 4)");
-  vtkSmartPointer<vtkPolyData> initial = boundarySurface(mesh, meshedBrain);
-  const SurfaceTopology topology = topologyOf(initial, names.mesh);
-  const std::size_t n = std::size_t(initial->GetNumberOfPoints());
-  if (n < 4) throw InputError(names.mesh + ": the brain surface of the mesh is empty");
-  vtkDataArray* meshNodeIds = initial->GetPointData()->GetArray("MeshNodeId");
-  std::vector<Vec> x0(n);
-  for (std::size_t i = 0; i < n; ++i) initial->GetPoint(vtkIdType(i), x0[i].data());
+  if (contents.meshedBrain.empty()) throw InputError(meshName + ": the mesh holds none of the brain labels (2, 3, 4)");
+  return contents;
+}
 
-  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
-  using SparseMatrix = Eigen::SparseMatrix<double>;
+/// The preoperative brain surface of the mesh: its polygons, triangles and edges, its points and
+/// the mesh node of each.
+struct BrainSurface {
+  vtkSmartPointer<vtkPolyData> polyData;
+  SurfaceTopology topology;
+  vtkDataArray* meshNodeIds = nullptr;
+  std::vector<Vec> points;
+
+  std::size_t size() const { return points.size(); }
+  long meshNode(std::size_t i) const { return std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)); }
+};
+
+BrainSurface brainSurfaceOf(vtkUnstructuredGrid* mesh, const std::set<int>& meshedBrain, const std::string& meshName)
+{
+  BrainSurface surface;
+  surface.polyData = boundarySurface(mesh, meshedBrain);
+  surface.topology = topologyOf(surface.polyData, meshName);
+  const std::size_t n = std::size_t(surface.polyData->GetNumberOfPoints());
+  if (n < 4) throw InputError(meshName + ": the brain surface of the mesh is empty");
+  surface.meshNodeIds = surface.polyData->GetPointData()->GetArray("MeshNodeId");
+  surface.points.resize(n);
+  for (std::size_t i = 0; i < n; ++i) surface.polyData->GetPoint(vtkIdType(i), surface.points[i].data());
+  return surface;
+}
+
+/// K, the surface's graph Laplacian: each node's degree on the diagonal, -1 for each edge.
+Eigen::SparseMatrix<double> graphLaplacian(const SurfaceTopology& topology, std::size_t n)
+{
   const Eigen::Index size = Eigen::Index(n);
-  SparseMatrix laplacian(size, size);
-  {
-    std::vector<Eigen::Triplet<double>> entries;
-    std::vector<double> degree(n, 0);
-    for (const auto& [a, b] : topology.edges) {
-      entries.emplace_back(a, b, -1.0);
-      entries.emplace_back(b, a, -1.0);
-      degree[std::size_t(a)] += 1;
-      degree[std::size_t(b)] += 1;
-    }
-    for (std::size_t i = 0; i < n; ++i) entries.emplace_back(Eigen::Index(i), Eigen::Index(i), degree[i]);
-    laplacian.setFromTriplets(entries.begin(), entries.end());
+  Eigen::SparseMatrix<double> laplacian(size, size);
+  std::vector<Eigen::Triplet<double>> entries;
+  std::vector<double> degree(n, 0);
+  for (const auto& [a, b] : topology.edges) {
+    entries.emplace_back(a, b, -1.0);
+    entries.emplace_back(b, a, -1.0);
+    degree[std::size_t(a)] += 1;
+    degree[std::size_t(b)] += 1;
   }
-  const MembraneStep membrane(laplacian, p);
-  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+  for (std::size_t i = 0; i < n; ++i) entries.emplace_back(Eigen::Index(i), Eigen::Index(i), degree[i]);
+  laplacian.setFromTriplets(entries.begin(), entries.end());
+  return laplacian;
+}
 
-  Eigen::MatrixXd initialPositions(size, 3);
-  for (std::size_t i = 0; i < n; ++i) initialPositions.row(Eigen::Index(i)) = x0[i].transpose();
+Eigen::MatrixXd rowsOf(const std::vector<Vec>& points)
+{
+  Eigen::MatrixXd rows(Eigen::Index(points.size()), 3);
+  for (std::size_t i = 0; i < points.size(); ++i) rows.row(Eigen::Index(i)) = points[i].transpose();
+  return rows;
+}
 
-  // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near
-  //    it (within a step); the same active surface, run on the preoperative labels, finds it. The
-  //    displacement imposed is then intraoperative boundary minus preoperative boundary, so what the
-  //    mesh approximates and what the method smooths cancels out, and no shift means no motion.
-  const auto targetStart = std::chrono::steady_clock::now();
-  const Eigen::MatrixXd smoothedStart = taubinSmoothed(initialPositions, laplacian, p.restSmoothingIterations);
-  Eigen::MatrixXd preopBoundary = smoothedStart;
-  std::vector<unsigned char> freeReason(n, 0); // 0 imposed, 1 resected tumour, 2 outside the image, 3 unmatched
-  FitOutcome preopFit;
-  preopFit.converged = true;
-  if (previousSurface) {
-    // An earlier scan of the same case found it already.
-    vtkDataArray* found = previousSurface->GetPointData()->GetArray("PreopBoundary");
-    vtkDataArray* previousIds = previousSurface->GetPointData()->GetArray("MeshNodeId");
-    if (!found || found->GetNumberOfComponents() != 3 || !previousIds) {
-      throw InputError(names.previousSurface + ": no point arrays \"PreopBoundary\" (3 components) and \"MeshNodeId\"");
-    }
-    if (previousSurface->GetNumberOfPoints() != vtkIdType(n)) {
-      throw InputError(names.previousSurface + ": " + std::to_string(previousSurface->GetNumberOfPoints()) +
-                       " surface nodes, not the " + std::to_string(n) + " of " + names.mesh + ": another mesh");
-    }
-    for (std::size_t i = 0; i < n; ++i) {
-      if (std::lround(previousIds->GetComponent(vtkIdType(i), 0)) != std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))) {
-        throw InputError(names.previousSurface + ": surface node " + std::to_string(i) + " is another mesh node than in " + names.mesh);
-      }
-      for (int d = 0; d < 3; ++d) {
-        const double value = found->GetComponent(vtkIdType(i), d);
-        if (!std::isfinite(value)) throw InputError(names.previousSurface + ": a PreopBoundary value is not finite");
-        preopBoundary(Eigen::Index(i), d) = value;
-      }
-    }
-    result.preopBoundarySeconds = secondsSince(targetStart);
-  } else if (preopLabels) {
-    Warnings ignored;
-    // Only the part around the surface is needed: distance maps are the stage's main cost.
-    std::vector<Vec> indices(n);
-    const PreopToIntraopIndex toFullIndex = physicalToIndexOf(ImageGeometry::of(preopLabels));
-    for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
-    const LabelImage::Pointer around = cropped(*preopLabels, regionAround(ImageGeometry::of(preopLabels), indices, PreopCropMarginMm));
-    const MaskImage::Pointer preopMask = targetBrainMask(*around, brain, names.preopLabels, ignored);
-    const ScalarImage::Pointer preopDistance = smoothed(boundaryDistanceMm(preopMask), p.distanceSmoothingMm);
-    const TrilinearVolume preopField(*preopDistance);
-    const PreopToIntraopIndex toPreopIndex = physicalToIndexOf(ImageGeometry::of(around.GetPointer()));
-    std::vector<unsigned char> none(n, 0);
-    preopFit = fitSurface(membrane, smoothedStart, preopField, toPreopIndex, nullptr, none, p);
-    preopBoundary = preopFit.positions;
-    result.preopBoundarySeconds = secondsSince(targetStart);
+/// The preoperative boundary an earlier scan of the same case found (its surface's "PreopBoundary"),
+/// checked to belong to the same mesh nodes; written into `boundary`.
+void readPreopBoundary(vtkPolyData* previousSurface, const BrainSurface& surface, const ActiveSurfaceInputNames& names,
+                       Eigen::MatrixXd& boundary)
+{
+  const std::size_t n = surface.size();
+  vtkDataArray* found = previousSurface->GetPointData()->GetArray("PreopBoundary");
+  vtkDataArray* previousIds = previousSurface->GetPointData()->GetArray("MeshNodeId");
+  if (!found || found->GetNumberOfComponents() != 3 || !previousIds) {
+    throw InputError(names.previousSurface + ": no point arrays \"PreopBoundary\" (3 components) and \"MeshNodeId\"");
   }
-
-  // -- The intraoperative target.
-  const auto intraopStart = std::chrono::steady_clock::now();
-  // Is the tumour resected? Its volume in the intraoperative labels against the mesh's.
-  if (meshVolumeMl.count(p.tumourLabel)) {
-    std::size_t tumourVoxels = 0;
-    const LabelPixel* l = intraopLabels.GetBufferPointer();
-    for (std::size_t i = 0, count = grid.numberOfVoxels(); i < count; ++i) tumourVoxels += l[i] == p.tumourLabel;
-    const double voxelMl = grid.spacing[0] * grid.spacing[1] * grid.spacing[2] / 1000.0;
-    result.tumourResected = double(tumourVoxels) * voxelMl < p.resectedFraction * meshVolumeMl[p.tumourLabel];
+  if (previousSurface->GetNumberOfPoints() != vtkIdType(n)) {
+    throw InputError(names.previousSurface + ": " + std::to_string(previousSurface->GetNumberOfPoints()) +
+                     " surface nodes, not the " + std::to_string(n) + " of " + names.mesh + ": another mesh");
   }
-  const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
-  std::vector<Vec> indices(n);
-  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
-  // -- What the field of view covers (a slab covers part of the brain): the nodes outside it are
-  //    left to the elastic model, or held at rest.
   for (std::size_t i = 0; i < n; ++i) {
-    const vtkIdType node = vtkIdType(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)));
+    if (std::lround(previousIds->GetComponent(vtkIdType(i), 0)) != surface.meshNode(i)) {
+      throw InputError(names.previousSurface + ": surface node " + std::to_string(i) + " is another mesh node than in " + names.mesh);
+    }
+    for (int d = 0; d < 3; ++d) {
+      const double value = found->GetComponent(vtkIdType(i), d);
+      if (!std::isfinite(value)) throw InputError(names.previousSurface + ": a PreopBoundary value is not finite");
+      boundary(Eigen::Index(i), d) = value;
+    }
+  }
+}
+
+/// The same active surface run on the preoperative labels, from `start`: where the preoperative
+/// brain boundary is at each node. Only the labels around the surface are used (distance maps are
+/// the stage's main cost).
+FitOutcome fitPreopBoundary(const LabelImage& preopLabels, const BrainSurface& surface, const std::set<int>& brain,
+                            const MembraneStep& membrane, const Eigen::MatrixXd& start, const ActiveSurfaceParameters& p,
+                            const std::string& preopLabelsName)
+{
+  const std::size_t n = surface.size();
+  Warnings ignored;
+  std::vector<Vec> indices(n);
+  const PreopToIntraopIndex toFullIndex = physicalToIndexOf(ImageGeometry::of(&preopLabels));
+  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(surface.points[i]);
+  const LabelImage::Pointer around = cropped(preopLabels, regionAround(ImageGeometry::of(&preopLabels), indices, PreopCropMarginMm));
+  const MaskImage::Pointer preopMask = targetBrainMask(*around, brain, preopLabelsName, ignored);
+  const ScalarImage::Pointer preopDistance = smoothed(boundaryDistanceMm(preopMask), p.distanceSmoothingMm);
+  const TrilinearVolume preopField(*preopDistance);
+  const PreopToIntraopIndex toPreopIndex = physicalToIndexOf(ImageGeometry::of(around.GetPointer()));
+  std::vector<unsigned char> none(n, 0);
+  return fitSurface(membrane, start, preopField, toPreopIndex, nullptr, none, p);
+}
+
+/// Whether the tumour is resected: its volume in the intraoperative labels against the mesh's.
+bool tumourIsResected(const LabelImage& intraopLabels, const ImageGeometry& grid, const MeshContents& contents,
+                      const ActiveSurfaceParameters& p)
+{
+  if (!contents.volumeMl.count(p.tumourLabel)) return false;
+  std::size_t tumourVoxels = 0;
+  const LabelPixel* l = intraopLabels.GetBufferPointer();
+  for (std::size_t i = 0, count = grid.numberOfVoxels(); i < count; ++i) tumourVoxels += l[i] == p.tumourLabel;
+  const double voxelMl = grid.spacing[0] * grid.spacing[1] * grid.spacing[2] / 1000.0;
+  return double(tumourVoxels) * voxelMl < p.resectedFraction * contents.volumeMl.at(p.tumourLabel);
+}
+
+/// Why each node is free before matching: the resected tumour's nodes, and the nodes outside what
+/// the field of view covers (a slab covers part of the brain), left to the elastic model or held at
+/// rest. Counts the covered nodes into `result`.
+std::vector<unsigned char> freeReasonsBeforeMatching(const BrainSurface& surface, const std::set<vtkIdType>& tumourNodes,
+                                                     const PreopToIntraopIndex& toFullIndex, const ImageGeometry& grid,
+                                                     const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  std::vector<unsigned char> freeReason(surface.size(), 0);
+  for (std::size_t i = 0; i < surface.size(); ++i) {
+    const vtkIdType node = vtkIdType(surface.meshNode(i));
     if (result.tumourResected && tumourNodes.count(node)) freeReason[i] = ResectedTumour;
-    if (!TrilinearVolume::insideGrid(toFullIndex(x0[i]), grid)) {
+    if (!TrilinearVolume::insideGrid(toFullIndex(surface.points[i]), grid)) {
       freeReason[i] = p.holdOutsideFieldOfView ? HeldOutsideImage : OutsideImage;
     } else {
       ++result.coveredSurfaceNodes;
     }
   }
-  result.surfaceNodes = n;
-  result.coveredBrainMl = coveredBrainVolumeMl(mesh, cellLabels, meshedBrain, toFullIndex, grid, result.meshedBrainMl);
-  requireEnoughCoverage(result, p, names.labels);
-  const itk::ImageRegion<3> region = regionAround(grid, indices, CropMarginMm);
-  const LabelImage::Pointer labelsAround = cropped(intraopLabels, region);
-  const MaskImage::Pointer mask = targetBrainMask(*labelsAround, brain, names.labels, result.warnings);
-  const ScalarImage::Pointer distance = smoothed(boundaryDistanceMm(mask), p.distanceSmoothingMm);
-  const TrilinearVolume distanceField(*distance);
-  const ImageGeometry cropGrid = ImageGeometry::of(labelsAround.GetPointer());
-  const PreopToIntraopIndex toIndex = preopToIntraopIndex(rigidIntraopToPreop, cropGrid);
+  return freeReason;
+}
 
+/// The intraoperative target around the surface: the brain's (smoothed) signed distance map on a
+/// crop of the labels, and the map from the model frame to the crop's indices.
+struct IntraopTarget {
+  itk::ImageRegion<3> region;
+  LabelImage::Pointer labels;
+  ScalarImage::Pointer distance;
+  std::unique_ptr<TrilinearVolume> field; ///< samples `distance`
+  ImageGeometry grid;
+  PreopToIntraopIndex toIndex;
+};
 
-  // Expected grey levels just inside and just outside the brain, from the segmentation's boundary band.
-  std::unique_ptr<ImageEdgeTerm> edges;
-  if (intraopImage && (p.imageWeight > 0 || p.imageRescue)) {
-    edges = std::make_unique<ImageEdgeTerm>();
-    const ScalarImage::Pointer imageAround = cropped(*intraopImage, region);
-    const float* d = distance->GetBufferPointer();
-    const float* v = imageAround->GetBufferPointer();
-    const LabelPixel* l = labelsAround->GetBufferPointer();
-    std::vector<double> inside, outsideBand, fluid, parenchyma;
-    for (std::size_t i = 0, count = cropGrid.numberOfVoxels(); i < count; ++i) {
-      if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
-      else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
-      if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
-      else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
-    }
-    result.expectedInsideIntensity = median(inside);
-    result.expectedOutsideIntensity = median(outsideBand);
-    // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
-    // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
-    // for the image term to catch, not a second side.
-    result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
-    edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
-                                result.outsideBrighterShare);
-    result.outsideSides = edges->sides.size();
-    edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
-    edges->keepAlive = imageAround;
+IntraopTarget intraopTargetAround(const LabelImage& intraopLabels, const std::vector<Vec>& indices, const std::set<int>& brain,
+                                  const SpatialTransform& rigidIntraopToPreop, const ActiveSurfaceParameters& p,
+                                  const std::string& labelsName, Warnings& warnings)
+{
+  IntraopTarget target;
+  target.region = regionAround(ImageGeometry::of(&intraopLabels), indices, CropMarginMm);
+  target.labels = cropped(intraopLabels, target.region);
+  const MaskImage::Pointer mask = targetBrainMask(*target.labels, brain, labelsName, warnings);
+  target.distance = smoothed(boundaryDistanceMm(mask), p.distanceSmoothingMm);
+  target.field = std::make_unique<TrilinearVolume>(*target.distance);
+  target.grid = ImageGeometry::of(target.labels.GetPointer());
+  target.toIndex = preopToIntraopIndex(rigidIntraopToPreop, target.grid);
+  return target;
+}
+
+/// The image term's expected grey levels just inside and just outside the brain, from the
+/// segmentation's boundary band; the figures go into `result`.
+std::unique_ptr<ImageEdgeTerm> imageEdgeTermOf(const ScalarImage& intraopImage, const IntraopTarget& target,
+                                               const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  auto edges = std::make_unique<ImageEdgeTerm>();
+  const ScalarImage::Pointer imageAround = cropped(intraopImage, target.region);
+  const float* d = target.distance->GetBufferPointer();
+  const float* v = imageAround->GetBufferPointer();
+  const LabelPixel* l = target.labels->GetBufferPointer();
+  std::vector<double> inside, outsideBand, fluid, parenchyma;
+  for (std::size_t i = 0, count = target.grid.numberOfVoxels(); i < count; ++i) {
+    if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
+    else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
+    if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
+    else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
   }
-  result.targetSeconds = secondsSince(intraopStart);
+  result.expectedInsideIntensity = median(inside);
+  result.expectedOutsideIntensity = median(outsideBand);
+  // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
+  // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
+  // for the image term to catch, not a second side.
+  result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
+  edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
+                              result.outsideBrighterShare);
+  result.outsideSides = edges->sides.size();
+  edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
+  edges->keepAlive = imageAround;
+  return edges;
+}
 
-  // -- The active surface, from the preoperative boundary onto the intraoperative one.
-  const auto iterationStart = std::chrono::steady_clock::now();
-  const std::vector<double> initialResiduals = residualsAt(initialPositions, distanceField, toIndex);
-  FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
-  result.iterations = fit.iterations;
+/// The active surface's fit onto the intraoperative boundary, and (when asked) the matches along
+/// the sinking direction.
+struct IntraopFit {
+  FitOutcome fit;
   SinkingDirectionMatch along;
+};
+
+IntraopFit fitIntraopBoundary(const MembraneStep& membrane, const Eigen::MatrixXd& preopBoundary, const IntraopTarget& target,
+                              const ImageEdgeTerm* edges, const std::vector<unsigned char>& freeReason,
+                              const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  IntraopFit out;
+  out.fit = fitSurface(membrane, preopBoundary, *target.field, target.toIndex, edges, freeReason, p);
+  result.iterations = out.fit.iterations;
   if (p.matchAlongSinkingDirection) {
-    along = matchAlongSinkingDirection(preopBoundary, fit, distanceField, toIndex, freeReason, p);
-    result.sinkingDirection = {along.direction[0], along.direction[1], along.direction[2]};
-    result.directionalNodes = along.matched;
-    if (along.matched > 0) {
-      const Eigen::MatrixXd start = fit.positions - preopBoundary;
-      fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p, &start, &along.targets);
-      result.iterations += fit.iterations;
+    out.along = matchAlongSinkingDirection(preopBoundary, out.fit, *target.field, target.toIndex, freeReason, p);
+    result.sinkingDirection = {out.along.direction[0], out.along.direction[1], out.along.direction[2]};
+    result.directionalNodes = out.along.matched;
+    if (out.along.matched > 0) {
+      const Eigen::MatrixXd start = out.fit.positions - preopBoundary;
+      out.fit = fitSurface(membrane, preopBoundary, *target.field, target.toIndex, edges, freeReason, p, &start, &out.along.targets);
+      result.iterations += out.fit.iterations;
     }
   }
-  result.converged = fit.converged;
+  result.converged = out.fit.converged;
+  return out;
+}
+
+void warnIfNotConverged(const FitOutcome& preopFit, bool preopFitted, const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
   if (!result.converged) {
     result.warnings.push_back("surface: the active surface did not converge in " + std::to_string(p.maximumIterations) +
                               " iterations");
   }
-  if (preopLabels && !preopFit.converged) {
+  if (preopFitted && !preopFit.converged) {
     result.warnings.push_back("surface: the fit to the preoperative boundary did not converge in " +
                               std::to_string(p.maximumIterations) + " iterations");
   }
-  result.iterationSeconds = secondsSince(iterationStart);
+}
 
-  // -- Nodes left free, and the figures.
+/// Leaves free the nodes that stayed far from the boundary, counts each reason and the residual
+/// figures; refuses a fit where fewer than half the covered nodes found the boundary.
+void summariseMatch(const FitOutcome& fit, const std::vector<double>& initialResiduals, std::vector<unsigned char>& freeReason,
+                    const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
   std::vector<double> residuals, before;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
     if (freeReason[i] == 0 && fit.residuals[i] > p.unmatchedResidualMm) freeReason[i] = 3;
     switch (freeReason[i]) {
     case 0:
@@ -1063,21 +1117,17 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   result.initialMeanResidualMm = mean(before);
   result.p95ResidualMm = percentile(residuals, 0.95);
   result.maxResidualMm = *std::max_element(residuals.begin(), residuals.end());
+}
 
-  if (p.snapToBoundary) {
-    result.unsnappedNodes = snapOntoBoundary(fit, along.targets, preopBoundary, topology.triangles, freeReason, p);
-  }
-  Eigen::MatrixXd u = fit.positions - preopBoundary;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (freeReason[i] == HeldOutsideImage) {
-      u.row(Eigen::Index(i)).setZero();
-      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
-    }
-  }
+/// Refuses (MethodError) a surface that folded: more than 1 % of its triangles reversed; warns of fewer.
+void requireUnfolded(const Eigen::MatrixXd& preopBoundary, const Eigen::MatrixXd& positions, const SurfaceTopology& topology,
+                     ActiveSurfaceResult& result)
+{
+  const std::size_t n = std::size_t(preopBoundary.rows());
   std::vector<Vec> from(n), to(n);
   for (std::size_t i = 0; i < n; ++i) {
     from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
-    to[i] = fit.positions.row(Eigen::Index(i)).transpose();
+    to[i] = positions.row(Eigen::Index(i)).transpose();
   }
   for (const auto& t : topology.triangles) result.flippedTriangles += triangleNormal(from, t).dot(triangleNormal(to, t)) <= 0;
   if (result.flippedTriangles > topology.triangles.size() / 100) {
@@ -1087,8 +1137,34 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   if (result.flippedTriangles > 0) {
     result.warnings.push_back("surface: " + std::to_string(result.flippedTriangles) + " surface triangles reversed their orientation");
   }
+}
 
-  // -- The deformed surface: each mesh node moved by its displacement, with the arrays.
+/// Each node's displacement from its preoperative boundary point: snapped onto the target boundary
+/// where asked, zero where held outside the image; the surface must not have folded.
+Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
+                                     const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                                     ActiveSurfaceResult& result)
+{
+  FitOutcome& fit = fitted.fit;
+  if (p.snapToBoundary) {
+    result.unsnappedNodes = snapOntoBoundary(fit, fitted.along.targets, preopBoundary, topology.triangles, freeReason, p);
+  }
+  Eigen::MatrixXd u = fit.positions - preopBoundary;
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
+    if (freeReason[i] == HeldOutsideImage) {
+      u.row(Eigen::Index(i)).setZero();
+      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
+    }
+  }
+  requireUnfolded(preopBoundary, fit.positions, topology, result);
+  return u;
+}
+
+/// The deformed surface: each mesh node moved by its displacement, with the arrays the contract
+/// names, and "PreopBoundary" for the next scan (deformBrainSurface's previousSurface).
+vtkSmartPointer<vtkPolyData> deformedSurface(const BrainSurface& initial, const Eigen::MatrixXd& u, const Eigen::MatrixXd& preopBoundary,
+                                             const std::vector<unsigned char>& freeReason, ActiveSurfaceResult& result)
+{
   auto surface = vtkSmartPointer<vtkPolyData>::New();
   vtkNew<vtkPoints> points;
   points->SetDataTypeToDouble();
@@ -1100,34 +1176,119 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   nodeIds->SetName("MeshNodeId");
   imposed->SetName("Imposed");
   std::vector<double> magnitudes;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < initial.size(); ++i) {
     const Vec d = u.row(Eigen::Index(i)).transpose();
-    const Vec moved = x0[i] + d;
+    const Vec moved = initial.points[i] + d;
     points->InsertNextPoint(moved.data());
     displacement->InsertNextTuple(d.data());
     magnitude->InsertNextValue(d.norm());
     magnitudes.push_back(d.norm());
-    nodeIds->InsertNextValue(int(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))));
+    nodeIds->InsertNextValue(int(initial.meshNode(i)));
     imposed->InsertNextValue(freeReason[i] == Matched || freeReason[i] == HeldOutsideImage ? 1 : 0);
   }
   result.meanDisplacementMm = mean(magnitudes);
   result.maxDisplacementMm = *std::max_element(magnitudes.begin(), magnitudes.end());
   surface->SetPoints(points);
-  surface->SetPolys(initial->GetPolys());
+  surface->SetPolys(initial.polyData->GetPolys());
   surface->GetPointData()->AddArray(displacement);
   surface->GetPointData()->AddArray(magnitude);
   surface->GetPointData()->AddArray(nodeIds);
   surface->GetPointData()->AddArray(imposed);
-  vtkNew<vtkDoubleArray> preopBoundaryArray; // for the next scan (deformBrainSurface's previousSurface)
+  vtkNew<vtkDoubleArray> preopBoundaryArray;
   preopBoundaryArray->SetName("PreopBoundary");
   preopBoundaryArray->SetNumberOfComponents(3);
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < initial.size(); ++i) {
     const Vec b = preopBoundary.row(Eigen::Index(i)).transpose();
     preopBoundaryArray->InsertNextTuple(b.data());
   }
   surface->GetPointData()->AddArray(preopBoundaryArray);
   surface->GetPointData()->SetActiveScalars("DisplacementMagnitude");
-  result.surface = surface;
+  return surface;
+}
+
+/// Refuses inputs that do not fit together: a non-linear rigid transform, labels off the image's
+/// grid, a mesh without cell labels (returned).
+vtkDataArray* checkedCellLabels(vtkUnstructuredGrid* mesh, const LabelImage& intraopLabels, const ScalarImage* intraopImage,
+                                const SpatialTransform& rigidIntraopToPreop, const ActiveSurfaceInputNames& names)
+{
+  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError(names.rigid + ": the rigid transform is not linear");
+  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
+  if (intraopImage && !grid.sameGridAs(ImageGeometry::of(intraopImage))) {
+    throw InputError(names.labels + ": not on the intraoperative image's grid (" + grid.describe() + " against " +
+                     ImageGeometry::of(intraopImage).describe() + ")");
+  }
+  vtkDataArray* cellLabels = mesh->GetCellData()->GetArray("Label");
+  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+  return cellLabels;
+}
+} // namespace
+
+ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
+                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
+                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
+                                       vtkPolyData* previousSurface)
+{
+  p.validate();
+  ActiveSurfaceResult result;
+  vtkDataArray* cellLabels = checkedCellLabels(mesh, intraopLabels, intraopImage, rigidIntraopToPreop, names);
+  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
+
+  // -- The preoperative brain surface, and what is known of its nodes.
+  const std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
+  const MeshContents contents = meshContentsOf(mesh, cellLabels, brain, p, names.mesh);
+  const BrainSurface surface = brainSurfaceOf(mesh, contents.meshedBrain, names.mesh);
+  const std::size_t n = surface.size();
+
+  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
+  const Eigen::SparseMatrix<double> laplacian = graphLaplacian(surface.topology, n);
+  const MembraneStep membrane(laplacian, p);
+  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+  const Eigen::MatrixXd initialPositions = rowsOf(surface.points);
+
+  // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near
+  //    it (within a step); the same active surface, run on the preoperative labels, finds it. The
+  //    displacement imposed is then intraoperative boundary minus preoperative boundary, so what the
+  //    mesh approximates and what the method smooths cancels out, and no shift means no motion.
+  const auto targetStart = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd smoothedStart = taubinSmoothed(initialPositions, laplacian, p.restSmoothingIterations);
+  Eigen::MatrixXd preopBoundary = smoothedStart;
+  FitOutcome preopFit;
+  preopFit.converged = true;
+  if (previousSurface) {
+    readPreopBoundary(previousSurface, surface, names, preopBoundary); // an earlier scan of the same case found it
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  } else if (preopLabels) {
+    preopFit = fitPreopBoundary(*preopLabels, surface, brain, membrane, smoothedStart, p, names.preopLabels);
+    preopBoundary = preopFit.positions;
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  }
+
+  // -- The intraoperative target, and which nodes it covers.
+  const auto intraopStart = std::chrono::steady_clock::now();
+  result.tumourResected = tumourIsResected(intraopLabels, grid, contents, p);
+  const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
+  std::vector<Vec> indices(n);
+  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(surface.points[i]);
+  std::vector<unsigned char> freeReason = freeReasonsBeforeMatching(surface, contents.tumourNodes, toFullIndex, grid, p, result);
+  result.surfaceNodes = n;
+  result.coveredBrainMl = coveredBrainVolumeMl(mesh, cellLabels, contents.meshedBrain, toFullIndex, grid, result.meshedBrainMl);
+  requireEnoughCoverage(result, p, names.labels);
+  const IntraopTarget target = intraopTargetAround(intraopLabels, indices, brain, rigidIntraopToPreop, p, names.labels, result.warnings);
+  std::unique_ptr<ImageEdgeTerm> edges;
+  if (intraopImage && (p.imageWeight > 0 || p.imageRescue)) edges = imageEdgeTermOf(*intraopImage, target, p, result);
+  result.targetSeconds = secondsSince(intraopStart);
+
+  // -- The active surface, from the preoperative boundary onto the intraoperative one.
+  const auto iterationStart = std::chrono::steady_clock::now();
+  const std::vector<double> initialResiduals = residualsAt(initialPositions, *target.field, target.toIndex);
+  IntraopFit fitted = fitIntraopBoundary(membrane, preopBoundary, target, edges.get(), freeReason, p, result);
+  warnIfNotConverged(preopFit, preopLabels != nullptr, p, result);
+  result.iterationSeconds = secondsSince(iterationStart);
+
+  // -- Nodes left free, the figures, and the deformed surface.
+  summariseMatch(fitted.fit, initialResiduals, freeReason, p, result);
+  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
+  result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;
 }
 
