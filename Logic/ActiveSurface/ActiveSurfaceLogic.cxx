@@ -136,25 +136,13 @@ private:
   long size_[3];
 };
 
-/// The target: the intraoperative brain as one solid (the largest 6-connected component of the
-/// brain labels, its enclosed holes such as a resection cavity filled).
-MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>& brain, const std::string& labelsName,
-                                   Warnings& warnings)
-{
-  const auto size = labels.GetLargestPossibleRegion().GetSize();
-  const long nx = long(size[0]), ny = long(size[1]), nz = long(size[2]);
-  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
-  const LabelPixel* l = labels.GetBufferPointer();
-  std::vector<unsigned char> inBrain(n, 0);
-  std::size_t brainVoxels = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (brain.count(l[i])) {
-      inBrain[i] = 1;
-      ++brainVoxels;
-    }
-  }
-  if (brainVoxels == 0) throw InputError(labelsName + ": the intraoperative segmentation holds no brain (labels 2-4)");
-  auto neighbours = [&](std::size_t i, auto&& visit) {
+/// A label map's voxel grid: its 6-neighbours of a voxel (by linear index).
+struct VoxelGrid {
+  long nx, ny, nz;
+
+  template <class Visit>
+  void forEachNeighbour(std::size_t i, Visit&& visit) const
+  {
     const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
     if (x > 0) visit(i - 1);
     if (x + 1 < nx) visit(i + 1);
@@ -162,34 +150,59 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
     if (y + 1 < ny) visit(i + std::size_t(nx));
     if (z > 0) visit(i - std::size_t(nx * ny));
     if (z + 1 < nz) visit(i + std::size_t(nx * ny));
-  };
-  // Components of the brain, in voxel order (deterministic); keep the largest.
-  std::vector<int> component(n, 0);
+  }
+  bool onBorder(std::size_t i) const
+  {
+    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
+    return x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+  }
+};
+
+/// The 6-connected components of the brain voxels, numbered from 1 in voxel order (deterministic;
+/// 0: not brain), with their sizes (componentSize[0] unused).
+struct BrainComponents {
+  std::vector<int> component;
   std::vector<std::size_t> componentSize{0};
+  int largest = 0;
+};
+
+BrainComponents brainComponentsOf(const std::vector<unsigned char>& inBrain, const VoxelGrid& grid)
+{
+  const std::size_t n = inBrain.size();
+  BrainComponents components;
+  components.component.assign(n, 0);
   std::vector<std::size_t> queue;
   for (std::size_t seed = 0; seed < n; ++seed) {
-    if (!inBrain[seed] || component[seed]) continue;
-    const int id = int(componentSize.size());
-    componentSize.push_back(0);
+    if (!inBrain[seed] || components.component[seed]) continue;
+    const int id = int(components.componentSize.size());
+    components.componentSize.push_back(0);
     queue.assign(1, seed);
-    component[seed] = id;
+    components.component[seed] = id;
     while (!queue.empty()) {
       const std::size_t i = queue.back();
       queue.pop_back();
-      ++componentSize[std::size_t(id)];
-      neighbours(i, [&](std::size_t j) {
-        if (inBrain[j] && !component[j]) {
-          component[j] = id;
+      ++components.componentSize[std::size_t(id)];
+      grid.forEachNeighbour(i, [&](std::size_t j) {
+        if (inBrain[j] && !components.component[j]) {
+          components.component[j] = id;
           queue.push_back(j);
         }
       });
     }
   }
-  const int largest = int(std::max_element(componentSize.begin(), componentSize.end()) - componentSize.begin());
-  const double keptFraction = double(componentSize[std::size_t(largest)]) / double(brainVoxels);
+  const auto& sizes = components.componentSize;
+  components.largest = int(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+  return components;
+}
+
+/// Refuses (InputError) a brain in two large pieces (the next holds more than a fifth); warns
+/// when more than 1 % lies apart from the largest piece.
+void requireOneBrain(const BrainComponents& components, std::size_t brainVoxels, const std::string& labelsName, Warnings& warnings)
+{
+  const double keptFraction = double(components.componentSize[std::size_t(components.largest)]) / double(brainVoxels);
   std::size_t secondLargest = 0;
-  for (std::size_t c = 1; c < componentSize.size(); ++c) {
-    if (int(c) != largest) secondLargest = std::max(secondLargest, componentSize[c]);
+  for (std::size_t c = 1; c < components.componentSize.size(); ++c) {
+    if (int(c) != components.largest) secondLargest = std::max(secondLargest, components.componentSize[c]);
   }
   if (double(secondLargest) > 0.2 * double(brainVoxels)) {
     std::ostringstream m;
@@ -204,13 +217,18 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
       << " % of the intraoperative brain is in pieces apart from the brain; they are ignored";
     warnings.push_back(w.str());
   }
-  // Fill what the outside cannot reach: the cavity, enclosed holes.
+}
+
+/// What the outside reaches from the grid's border without crossing the largest brain component:
+/// everything else (the brain, the cavity, enclosed holes) is the filled brain.
+std::vector<unsigned char> reachableFromOutside(const BrainComponents& components, const VoxelGrid& grid)
+{
+  const std::size_t n = components.component.size();
+  const int largest = components.largest;
   std::vector<unsigned char> outside(n, 0);
-  queue.clear();
+  std::vector<std::size_t> queue;
   for (std::size_t i = 0; i < n; ++i) {
-    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
-    const bool border = x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
-    if (border && component[i] != largest) {
+    if (grid.onBorder(i) && components.component[i] != largest) {
       outside[i] = 1;
       queue.push_back(i);
     }
@@ -218,13 +236,37 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
   while (!queue.empty()) {
     const std::size_t i = queue.back();
     queue.pop_back();
-    neighbours(i, [&](std::size_t j) {
-      if (!outside[j] && component[j] != largest) {
+    grid.forEachNeighbour(i, [&](std::size_t j) {
+      if (!outside[j] && components.component[j] != largest) {
         outside[j] = 1;
         queue.push_back(j);
       }
     });
   }
+  return outside;
+}
+
+/// The target: the intraoperative brain as one solid (the largest 6-connected component of the
+/// brain labels, its enclosed holes such as a resection cavity filled).
+MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>& brain, const std::string& labelsName,
+                                   Warnings& warnings)
+{
+  const auto size = labels.GetLargestPossibleRegion().GetSize();
+  const VoxelGrid grid{long(size[0]), long(size[1]), long(size[2])};
+  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
+  const LabelPixel* l = labels.GetBufferPointer();
+  std::vector<unsigned char> inBrain(n, 0);
+  std::size_t brainVoxels = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (brain.count(l[i])) {
+      inBrain[i] = 1;
+      ++brainVoxels;
+    }
+  }
+  if (brainVoxels == 0) throw InputError(labelsName + ": the intraoperative segmentation holds no brain (labels 2-4)");
+  const BrainComponents components = brainComponentsOf(inBrain, grid);
+  requireOneBrain(components, brainVoxels, labelsName, warnings);
+  const std::vector<unsigned char> outside = reachableFromOutside(components, grid);
   auto mask = MaskImage::New();
   mask->SetRegions(labels.GetLargestPossibleRegion());
   mask->CopyInformation(&labels);
@@ -562,122 +604,173 @@ void nearestEdge(const ImageEdgeTerm& edges, const OutsideSide& side, const Vec&
   }
 }
 
+/// The active surface's iterations (see fitSurface): the state shared by its steps.
+class SurfaceFit {
+public:
+  SurfaceFit(const MembraneStep& membrane, const Eigen::MatrixXd& rest, const TrilinearVolume& field, const PreopToIntraopIndex& toIndex,
+             const ImageEdgeTerm* edges, const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+             const PointTargets* targets)
+    : membrane_(membrane), rest_(rest), field_(field), toIndex_(toIndex), edges_(edges), freeReason_(freeReason), p_(p),
+      targets_(targets), n_(rest.rows()), force_(n_, 3), plausible_(std::size_t(n_), -1)
+  {
+    out_.residuals.assign(std::size_t(n_), 0.0);
+    out_.imageUsed.assign(std::size_t(n_), false);
+  }
+
+  FitOutcome run(const Eigen::MatrixXd* start);
+
+private:
+  Vec pull(Eigen::Index node, const Vec& x, double& residual, bool& imageUsed);
+  double imageTarget(Eigen::Index node, const Vec& index, const Vec& direction, double target, double& residual, bool& imageUsed);
+  void computeForces();
+  bool settled(const Eigen::VectorXd& moves, std::vector<double>& recentMean) const;
+
+  const MembraneStep& membrane_;
+  const Eigen::MatrixXd& rest_;
+  const TrilinearVolume& field_;
+  const PreopToIntraopIndex& toIndex_;
+  const ImageEdgeTerm* edges_;
+  const std::vector<unsigned char>& freeReason_;
+  const ActiveSurfaceParameters& p_;
+  const PointTargets* targets_;
+  const Eigen::Index n_;
+  FitOutcome out_;
+  Eigen::MatrixXd v_, force_;
+  // Whether the segmentation looks right at a node is decided every few iterations, not at every
+  // step: a node on the fence between the two would otherwise dither and never settle.
+  std::vector<signed char> plausible_;
+  bool refreshPlausibility_ = true;
+};
+
+/// The pull on a node at x: along the distance map's gradient (outward), to the target boundary
+/// (the segmentation's, or the image's edge where the image term decides), at most the largest step.
+Vec SurfaceFit::pull(Eigen::Index node, const Vec& x, double& residual, bool& imageUsed)
+{
+  imageUsed = false;
+  const Vec index = toIndex_(x);
+  Vec gradient;
+  const double d = field_.value(index, &gradient);
+  residual = std::abs(d);
+  Vec direction = toIndex_.gradientToPreop(gradient);
+  const double length = direction.norm();
+  if (!(length > 1e-6)) return Vec::Zero();
+  direction /= length;
+  double target = -d; // along `direction` (outward): the segmentation's boundary
+  if (edges_) target = imageTarget(node, index, direction, target, residual, imageUsed);
+  return std::clamp(target, -p_.maximumStepMm, p_.maximumStepMm) * direction;
+}
+
+/// The image term's say on the target along the normal. The expected contrast checks the
+/// segmentation: across its boundary the mean intensity of a few mm inside and of a few mm outside
+/// must differ as brain and its surroundings do (a local test, so a bias field does not upset it).
+/// Where it fails, the segmentation is wrong here (grown into fluid, or eroded into brain) and the
+/// image alone decides.
+double SurfaceFit::imageTarget(Eigen::Index node, const Vec& index, const Vec& direction, double target, double& residual,
+                               bool& imageUsed)
+{
+  const double step = 0.5; // the crossing is interpolated within a step
+  const Vec indexStep = toIndex_.matrix * direction * step;
+  signed char& known = plausible_[std::size_t(node)];
+  if (refreshPlausibility_ || known < 0) known = showsExpectedContrast(*edges_, index, indexStep, target, step, p_);
+  const bool segmentationPlausible = known == 1;
+  if (segmentationPlausible && !(p_.imageWeight > 0)) return target; // no edge needed
+  // The image's edge nearest to the node: inside-like to outside-like along the normal.
+  double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
+  for (const OutsideSide& side : edges_->sides) nearestEdge(*edges_, side, index, indexStep, step, p_.imageSearchMm, edgeAt, edgeDistance);
+  const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
+  if (segmentationPlausible) {
+    if (p_.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p_.imageTrustMm) {
+      target = (1 - p_.imageWeight) * target + p_.imageWeight * edgeAt;
+      imageUsed = true;
+    }
+  } else if (!p_.imageRescue) {
+    // the segmentation is followed anyway
+  } else if (edgeFound) {
+    target = edgeAt;
+    residual = std::abs(edgeAt); // the node is matched to the image's edge
+    imageUsed = true;
+  } else {
+    target = 0; // neither is to be trusted: the membrane carries the node
+  }
+  return target;
+}
+
+void SurfaceFit::computeForces()
+{
+  for (Eigen::Index i = 0; i < n_; ++i) {
+    if (freeReason_[std::size_t(i)] == ResectedTumour || freeReason_[std::size_t(i)] == OutsideImage) {
+      force_.row(i).setZero();
+      continue;
+    }
+    if (freeReason_[std::size_t(i)] == HeldOutsideImage) { // back to rest: the skull holds it
+      const double length = v_.row(i).norm();
+      force_.row(i) = length > p_.maximumStepMm ? Eigen::RowVector3d(-v_.row(i) * (p_.maximumStepMm / length)) : Eigen::RowVector3d(-v_.row(i));
+      continue;
+    }
+    bool image = false;
+    const Vec x = rest_.row(i).transpose() + v_.row(i).transpose();
+    Vec f = pull(i, x, out_.residuals[std::size_t(i)], image);
+    if (targets_ && targets_->used[std::size_t(i)]) {
+      const Vec towards = targets_->points[std::size_t(i)] - x;
+      const double length = towards.norm();
+      f = length > p_.maximumStepMm ? Vec(towards * (p_.maximumStepMm / length)) : towards;
+      image = false;
+    }
+    out_.imageUsed[std::size_t(i)] = image;
+    force_.row(i) = f.transpose();
+  }
+}
+
+/// Converged when nearly every node has stopped (a few may dither on a voxel's edge: the 95th
+/// percentile of the moves), or when the surface as a whole has stopped and only a few nodes dither
+/// between an edge and the segmentation: the mean movement over the last five steps is below half
+/// the threshold (after 30 iterations).
+bool SurfaceFit::settled(const Eigen::VectorXd& moves, std::vector<double>& recentMean) const
+{
+  std::vector<double> sortedMoves(moves.data(), moves.data() + moves.size());
+  auto at95 = sortedMoves.begin() + std::ptrdiff_t(0.95 * double(sortedMoves.size() - 1));
+  std::nth_element(sortedMoves.begin(), at95, sortedMoves.end());
+  const double movement = *at95;
+  recentMean.push_back(moves.mean());
+  bool quiet = false;
+  if (recentMean.size() >= 5 && out_.iterations >= 30) {
+    double sum = 0;
+    for (std::size_t k = recentMean.size() - 5; k < recentMean.size(); ++k) sum += recentMean[k];
+    quiet = sum / 5.0 < 0.5 * p_.convergenceMm;
+  }
+  return movement < p_.convergenceMm || quiet;
+}
+
+FitOutcome SurfaceFit::run(const Eigen::MatrixXd* start)
+{
+  v_ = start ? *start : Eigen::MatrixXd::Zero(n_, 3);
+  computeForces();
+  std::vector<double> recentMean;
+  for (out_.iterations = 1; out_.iterations <= p_.maximumIterations; ++out_.iterations) {
+    throwIfCancelled(p_.cancel, "the active surface");
+    const Eigen::MatrixXd next = membrane_.solve(v_ + p_.timeStep * force_);
+    const Eigen::VectorXd moves = (next - v_).rowwise().norm();
+    v_ = next;
+    refreshPlausibility_ = out_.iterations % 10 == 0;
+    computeForces();
+    refreshPlausibility_ = false;
+    if (settled(moves, recentMean)) {
+      out_.converged = true;
+      break;
+    }
+  }
+  out_.iterations = std::min(out_.iterations, p_.maximumIterations);
+  out_.positions = rest_ + v_;
+  out_.plausible = edges_ ? plausible_ : std::vector<signed char>(std::size_t(n_), -1);
+  return out_;
+}
+
 FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
                       const TrilinearVolume& field, const PreopToIntraopIndex& toIndex, const ImageEdgeTerm* edges,
                       const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
                       const Eigen::MatrixXd* start = nullptr, const PointTargets* targets = nullptr)
 {
-  const Eigen::Index n = rest.rows();
-  FitOutcome out;
-  out.residuals.assign(std::size_t(n), 0.0);
-  out.imageUsed.assign(std::size_t(n), false);
-  Eigen::MatrixXd v = start ? *start : Eigen::MatrixXd::Zero(n, 3), force(n, 3);
-  // Whether the segmentation looks right at a node is decided every few iterations, not at every
-  // step: a node on the fence between the two would otherwise dither and never settle.
-  std::vector<signed char> plausible(std::size_t(n), -1);
-  bool refreshPlausibility = true;
-  auto pull = [&](Eigen::Index node, const Vec& x, double& residual, bool& imageUsed) -> Vec {
-    imageUsed = false;
-    const Vec index = toIndex(x);
-    Vec gradient;
-    const double d = field.value(index, &gradient);
-    residual = std::abs(d);
-    Vec direction = toIndex.gradientToPreop(gradient);
-    const double length = direction.norm();
-    if (!(length > 1e-6)) return Vec::Zero();
-    direction /= length;
-    double target = -d; // along `direction` (outward): the segmentation's boundary
-    if (edges) {
-      const double step = 0.5; // the crossing is interpolated within a step
-      const Vec indexStep = toIndex.matrix * direction * step;
-      // The expected contrast checks the segmentation: across its boundary the mean intensity of a
-      // few mm inside and of a few mm outside must differ as brain and its surroundings do (a
-      // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
-      // here (grown into fluid, or eroded into brain) and the image alone decides.
-      signed char& known = plausible[std::size_t(node)];
-      if (refreshPlausibility || known < 0) known = showsExpectedContrast(*edges, index, indexStep, target, step, p);
-      const bool segmentationPlausible = known == 1;
-      if (segmentationPlausible && !(p.imageWeight > 0)) {
-        return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction; // no edge needed
-      }
-      // The image's edge nearest to the node: inside-like to outside-like along the normal.
-      double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
-      for (const OutsideSide& side : edges->sides) nearestEdge(*edges, side, index, indexStep, step, p.imageSearchMm, edgeAt, edgeDistance);
-      const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
-      if (segmentationPlausible) {
-        if (p.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p.imageTrustMm) {
-          target = (1 - p.imageWeight) * target + p.imageWeight * edgeAt;
-          imageUsed = true;
-        }
-      } else if (!p.imageRescue) {
-        // the segmentation is followed anyway
-      } else if (edgeFound) {
-        target = edgeAt;
-        residual = std::abs(edgeAt); // the node is matched to the image's edge
-        imageUsed = true;
-      } else {
-        target = 0; // neither is to be trusted: the membrane carries the node
-      }
-    }
-    return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction;
-  };
-  auto computeForces = [&]() {
-    for (Eigen::Index i = 0; i < n; ++i) {
-      if (freeReason[std::size_t(i)] == ResectedTumour || freeReason[std::size_t(i)] == OutsideImage) {
-        force.row(i).setZero();
-        continue;
-      }
-      if (freeReason[std::size_t(i)] == HeldOutsideImage) { // back to rest: the skull holds it
-        const double length = v.row(i).norm();
-        force.row(i) = length > p.maximumStepMm ? Eigen::RowVector3d(-v.row(i) * (p.maximumStepMm / length)) : Eigen::RowVector3d(-v.row(i));
-        continue;
-      }
-      bool image = false;
-      const Vec x = rest.row(i).transpose() + v.row(i).transpose();
-      Vec f = pull(i, x, out.residuals[std::size_t(i)], image);
-      if (targets && targets->used[std::size_t(i)]) {
-        const Vec towards = targets->points[std::size_t(i)] - x;
-        const double length = towards.norm();
-        f = length > p.maximumStepMm ? Vec(towards * (p.maximumStepMm / length)) : towards;
-        image = false;
-      }
-      out.imageUsed[std::size_t(i)] = image;
-      force.row(i) = f.transpose();
-    }
-  };
-  computeForces();
-  std::vector<double> recentMean;
-  for (out.iterations = 1; out.iterations <= p.maximumIterations; ++out.iterations) {
-    throwIfCancelled(p.cancel, "the active surface");
-    const Eigen::MatrixXd next = membrane.solve(v + p.timeStep * force);
-    const Eigen::VectorXd moves = (next - v).rowwise().norm();
-    v = next;
-    refreshPlausibility = out.iterations % 10 == 0;
-    computeForces();
-    refreshPlausibility = false;
-    // Converged when nearly every node has stopped (a few may dither on a voxel's edge).
-    std::vector<double> sortedMoves(moves.data(), moves.data() + moves.size());
-    auto at95 = sortedMoves.begin() + std::ptrdiff_t(0.95 * double(sortedMoves.size() - 1));
-    std::nth_element(sortedMoves.begin(), at95, sortedMoves.end());
-    const double movement = *at95;
-    recentMean.push_back(moves.mean());
-    // Or when the surface as a whole has stopped and only a few nodes dither between an edge and
-    // the segmentation: the mean movement over the last five steps is below half the threshold.
-    bool settled = false;
-    if (recentMean.size() >= 5 && out.iterations >= 30) {
-      double sum = 0;
-      for (std::size_t k = recentMean.size() - 5; k < recentMean.size(); ++k) sum += recentMean[k];
-      settled = sum / 5.0 < 0.5 * p.convergenceMm;
-    }
-    if (movement < p.convergenceMm || settled) {
-      out.converged = true;
-      break;
-    }
-  }
-  out.iterations = std::min(out.iterations, p.maximumIterations);
-  out.positions = rest + v;
-  out.plausible = edges ? plausible : std::vector<signed char>(std::size_t(n), -1);
-  return out;
+  return SurfaceFit(membrane, rest, field, toIndex, edges, freeReason, p, targets).run(start);
 }
 } // namespace
 
