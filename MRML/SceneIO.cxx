@@ -401,7 +401,9 @@ std::string colorTableFromSlicerId(const std::string& colorNodeId)
   return colorNodeId;
 }
 
-void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions& options)
+namespace {
+/// The scene's folders; the file names its nodes already use are taken.
+WriteContext writeContextFor(const Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions& options)
 {
   WriteContext context;
   context.sceneFolder = mrmlPath.has_parent_path() ? mrmlPath.parent_path() : fs::path(".");
@@ -410,91 +412,107 @@ void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions&
   for (const auto& node : scene.nodes()) {
     if (!node->storageFile().empty()) context.usedStems.insert(node->storageFile().filename().string());
   }
+  return context;
+}
 
+/// Writes the node's data to a new file of the data folder unless its storage file is current.
+void storeNodeData(Node& node, WriteContext& context)
+{
+  std::error_code ec;
+  if (node.storageFile().empty() || node.dataModifiedSinceStorage() || !fs::exists(node.storageFile(), ec)) {
+    const fs::path file = context.newDataFile(node.name(), dataExtension(node));
+    writeNodeData(node, file);
+    node.setStorageFile(fs::absolute(file));
+  }
+  node.markStored();
+}
+
+std::string modelDisplayElement(const ModelNode& model, const std::string& displayId)
+{
+  const ModelDisplay& d = model.display();
+  Element display("ModelDisplay");
+  display.set("id", displayId).set("name", "ModelDisplay").set("hideFromEditors", true);
+  display.set("color", vectorString(d.color)).set("opacity", d.opacity).set("visibility", true);
+  display.set("visibility2D", true).set("visibility3D", true).set("scalarVisibility", d.scalarVisibility);
+  if (!d.activeScalarName.empty()) {
+    const bool onCells = model.mesh() && !model.mesh()->GetPointData()->HasArray(d.activeScalarName.c_str()) &&
+                         model.mesh()->GetCellData()->HasArray(d.activeScalarName.c_str());
+    display.set("activeScalarName", d.activeScalarName).set("activeAttributeLocation", onCells ? "cell" : "point");
+  }
+  display.set("colorNodeID", slicerColorNodeId(d.colorTable));
+  if (d.scalarRange) {
+    display.set("scalarRangeFlag", "UseManual")
+      .set("scalarRange", formatNumber((*d.scalarRange)[0]) + " " + formatNumber((*d.scalarRange)[1]));
+  } else {
+    display.set("scalarRangeFlag", "UseData");
+  }
+  return display.str();
+}
+
+std::string transformElements(const TransformNode& transform, const std::string& fileName, const std::string& storageId,
+                              const std::string& transformId)
+{
+  const char* tag = transform.type() == TransformNode::Type::Linear ? "LinearTransform"
+                    : transform.type() == TransformNode::Type::DisplacementField ? "GridTransform"
+                                                                                 : "Transform";
+  Element e = commonElement(tag, transform.id(), transform.name(), attributesWithRole(transform), referencesOf("", storageId, transformId));
+  if (transform.type() == TransformNode::Type::Linear) {
+    e.set("matrixTransformToParent", matrixTransformToParent(transform.transformFromParent()));
+  }
+  Element storage("TransformStorage");
+  storage.set("id", storageId).set("name", "TransformStorage").set("hideFromEditors", true);
+  storage.set("fileName", fileName).set("useCompression", "1").set("preferITKv3CompatibleTransforms", false);
+  return e.str() + storage.str();
+}
+
+/// The MRML elements of a stored node (not landmarks): the node, its display, its storage.
+std::string nodeElements(const Node& node, const std::string& fileName, const std::string& transformId)
+{
+  const std::string storageId = node.id() + "Storage";
+  const std::string displayId = node.id() + "Display";
+  std::string xml;
+  switch (node.kind()) {
+  case NodeKind::ScalarVolume:
+    xml += commonElement("Volume", node.id(), node.name(), attributesWithRole(node), referencesOf(displayId, storageId, transformId)).str();
+    writeVolumeDisplay(xml, "VolumeDisplay", displayId, static_cast<const ScalarVolumeNode&>(node).display());
+    xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
+    break;
+  case NodeKind::LabelMapVolume:
+    xml += commonElement("LabelMapVolume", node.id(), node.name(), attributesWithRole(node),
+                         referencesOf(displayId, storageId, transformId)).str();
+    writeVolumeDisplay(xml, "LabelMapVolumeDisplay", displayId, static_cast<const LabelMapVolumeNode&>(node).display());
+    xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
+    break;
+  case NodeKind::Model:
+    xml += commonElement("Model", node.id(), node.name(), attributesWithRole(node), referencesOf(displayId, storageId, transformId)).str();
+    xml += modelDisplayElement(static_cast<const ModelNode&>(node), displayId);
+    xml += storageElement("ModelStorage", storageId, fileName, true);
+    break;
+  case NodeKind::Transform:
+    xml += transformElements(static_cast<const TransformNode&>(node), fileName, storageId, transformId);
+    break;
+  case NodeKind::Landmarks: break;
+  }
+  return xml;
+}
+} // namespace
+
+void writeScene(Scene& scene, const fs::path& mrmlPath, const SceneWriteOptions& options)
+{
+  WriteContext context = writeContextFor(scene, mrmlPath, options);
   std::string xml = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<MRML  version=\"Slicer 5.2.2 31382\"  userTags=\"\">\n";
   for (const auto& nodePointer : scene.nodes()) {
     Node& node = *nodePointer;
     if (!hasData(node)) continue;
     const std::string transformId =
       !node.parentTransformId().empty() && scene.node(node.parentTransformId()) ? node.parentTransformId() : "";
-
     if (node.kind() == NodeKind::Landmarks) {
       xml += landmarkListElements(static_cast<LandmarksNode&>(node), transformId, context);
       node.markStored();
       continue;
     }
-
-    std::error_code ec;
-    if (node.storageFile().empty() || node.dataModifiedSinceStorage() || !fs::exists(node.storageFile(), ec)) {
-      const fs::path file = context.newDataFile(node.name(), dataExtension(node));
-      writeNodeData(node, file);
-      node.setStorageFile(fs::absolute(file));
-    }
-    node.markStored();
-    const std::string fileName = context.relative(node.storageFile());
-    const std::string storageId = node.id() + "Storage";
-    const std::string displayId = node.id() + "Display";
-
-    switch (node.kind()) {
-    case NodeKind::ScalarVolume: {
-      const auto& volume = static_cast<ScalarVolumeNode&>(node);
-      xml += commonElement("Volume", node.id(), node.name(), attributesWithRole(node),
-                           referencesOf(displayId, storageId, transformId)).str();
-      writeVolumeDisplay(xml, "VolumeDisplay", displayId, volume.display());
-      xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
-      break;
-    }
-    case NodeKind::LabelMapVolume: {
-      const auto& labels = static_cast<LabelMapVolumeNode&>(node);
-      xml += commonElement("LabelMapVolume", node.id(), node.name(), attributesWithRole(node),
-                           referencesOf(displayId, storageId, transformId)).str();
-      writeVolumeDisplay(xml, "LabelMapVolumeDisplay", displayId, labels.display());
-      xml += storageElement("VolumeArchetypeStorage", storageId, fileName, false);
-      break;
-    }
-    case NodeKind::Model: {
-      const auto& model = static_cast<ModelNode&>(node);
-      const ModelDisplay& d = model.display();
-      xml += commonElement("Model", node.id(), node.name(), attributesWithRole(node),
-                           referencesOf(displayId, storageId, transformId)).str();
-      Element display("ModelDisplay");
-      display.set("id", displayId).set("name", "ModelDisplay").set("hideFromEditors", true);
-      display.set("color", vectorString(d.color)).set("opacity", d.opacity).set("visibility", true);
-      display.set("visibility2D", true).set("visibility3D", true).set("scalarVisibility", d.scalarVisibility);
-      if (!d.activeScalarName.empty()) {
-        const bool onCells = model.mesh() && !model.mesh()->GetPointData()->HasArray(d.activeScalarName.c_str()) &&
-                             model.mesh()->GetCellData()->HasArray(d.activeScalarName.c_str());
-        display.set("activeScalarName", d.activeScalarName).set("activeAttributeLocation", onCells ? "cell" : "point");
-      }
-      display.set("colorNodeID", slicerColorNodeId(d.colorTable));
-      if (d.scalarRange) {
-        display.set("scalarRangeFlag", "UseManual")
-          .set("scalarRange", formatNumber((*d.scalarRange)[0]) + " " + formatNumber((*d.scalarRange)[1]));
-      } else {
-        display.set("scalarRangeFlag", "UseData");
-      }
-      xml += display.str();
-      xml += storageElement("ModelStorage", storageId, fileName, true);
-      break;
-    }
-    case NodeKind::Transform: {
-      const auto& transform = static_cast<TransformNode&>(node);
-      const char* tag = transform.type() == TransformNode::Type::Linear ? "LinearTransform"
-                        : transform.type() == TransformNode::Type::DisplacementField ? "GridTransform"
-                                                                                     : "Transform";
-      Element e = commonElement(tag, node.id(), node.name(), attributesWithRole(node), referencesOf("", storageId, transformId));
-      if (transform.type() == TransformNode::Type::Linear) {
-        e.set("matrixTransformToParent", matrixTransformToParent(transform.transformFromParent()));
-      }
-      xml += e.str();
-      Element storage("TransformStorage");
-      storage.set("id", storageId).set("name", "TransformStorage").set("hideFromEditors", true);
-      storage.set("fileName", fileName).set("useCompression", "1").set("preferITKv3CompatibleTransforms", false);
-      xml += storage.str();
-      break;
-    }
-    case NodeKind::Landmarks: break;
-    }
+    storeNodeData(node, context);
+    xml += nodeElements(node, context.relative(node.storageFile()), transformId);
   }
   xml += sliceViewElements(scene);
   xml += "</MRML>\n";
@@ -603,42 +621,25 @@ std::optional<SliceViewLayers> readSliceViewLayers(const std::map<std::string, P
   return std::nullopt;
 }
 
-} // namespace
-
-void readScene(Scene& scene, const fs::path& mrmlPath)
-{
-  std::error_code ec;
-  if (!fs::is_regular_file(mrmlPath, ec)) {
-    throw InputError(mrmlPath.string() + ": no such scene file");
-  }
-  vtkNew<vtkXMLDataParser> parser;
-  parser->SetFileName(mrmlPath.c_str());
-  parser->SetIgnoreCharacterData(1);
-  if (!parser->Parse() || !parser->GetRootElement() || std::string(parser->GetRootElement()->GetName()) != "MRML") {
-    throw InputError(mrmlPath.string() + ": not a MRML scene (no <MRML> root element, or malformed XML)");
-  }
-  vtkXMLDataElement* root = parser->GetRootElement();
+/// A scene file's elements by id (in the file's order), and how its nodes' files are found.
+struct ParsedScene {
+  fs::path mrmlPath, sceneFolder;
   std::map<std::string, ParsedElement> byId;
   std::vector<std::string> order;
-  for (int i = 0; i < root->GetNumberOfNestedElements(); ++i) {
-    vtkXMLDataElement* xml = root->GetNestedElement(i);
-    ParsedElement e;
-    e.tag = xml->GetName();
-    for (int a = 0; a < xml->GetNumberOfAttributes(); ++a) e.attributes[xml->GetAttributeName(a)] = xml->GetAttributeValue(a);
-    const std::string id = e.get("id");
-    if (id.empty()) continue;
-    byId[id] = e;
-    order.push_back(id);
-  }
-  const fs::path sceneFolder = mrmlPath.has_parent_path() ? mrmlPath.parent_path() : fs::path(".");
-  auto find = [&](const std::vector<std::string>& ids) -> const ParsedElement* {
+
+  /// The first of `ids` the file holds.
+  const ParsedElement* find(const std::vector<std::string>& ids) const
+  {
     for (const auto& id : ids) {
       auto it = byId.find(id);
       if (it != byId.end()) return &it->second;
     }
     return nullptr;
-  };
-  auto storageFileOf = [&](const ParsedElement& e) -> fs::path {
+  }
+
+  /// The node's storage file (relative to the scene's folder), which must exist.
+  fs::path storageFileOf(const ParsedElement& e) const
+  {
     const ParsedElement* storage = find(e.references("storage"));
     if (!storage || storage->get("fileName").empty()) {
       throw InputError(mrmlPath.string() + ": node '" + e.get("name") + "' (" + e.get("id") + ") has no storage file");
@@ -652,84 +653,133 @@ void readScene(Scene& scene, const fs::path& mrmlPath)
                        ", which does not exist");
     }
     return file;
-  };
-  // A data file's error, prefixed with the scene that refers to it.
-  auto withSceneContext = [&](auto&& read) {
+  }
+
+  /// A data file's error, prefixed with the scene that refers to it.
+  template <class Read>
+  auto withSceneContext(Read&& read) const
+  {
     try {
       return read();
     } catch (const InputError& error) {
       throw InputError(mrmlPath.string() + ": " + error.what());
     }
-  };
-
-  std::vector<std::pair<std::string, std::shared_ptr<Node>>> loaded; // old id -> node
-  std::map<std::string, std::string> parentOf;                      // old id -> old parent transform id
-  std::map<std::string, std::map<std::string, std::vector<NamedPoint>>> landmarkSides; // pairs name -> side -> points
-  std::map<std::string, std::pair<std::string, std::string>> landmarkInfo;            // pairs name -> (old id, role)
-
-  for (const std::string& id : order) {
-    const ParsedElement& e = byId[id];
-    std::shared_ptr<Node> node;
-    const std::string name = e.get("name", id);
-    if (e.tag == "Volume" || e.tag == "LabelMapVolume") {
-      const fs::path file = storageFileOf(e);
-      const ParsedElement* display = find(e.references("display"));
-      if (e.tag == "Volume" && e.get("labelMap") != "1") {
-        auto volume = ScalarVolumeNode::create(name, withSceneContext([&] { return readScalarVolume(file); }));
-        volume->setDisplay(readVolumeDisplay(display, VolumeDisplay{}));
-        node = volume;
-      } else {
-        auto labels = LabelMapVolumeNode::create(name, withSceneContext([&] { return readLabelVolume(file); }));
-        labels->setDisplay(readVolumeDisplay(display, VolumeDisplay{"Labels", {}, {}, {}, {}, 1.0}));
-        node = labels;
-      }
-      node->setStorageFile(fs::absolute(file));
-    } else if (e.tag == "Model") {
-      const fs::path file = storageFileOf(e);
-      auto model = ModelNode::create(name, withSceneContext([&] { return readModel(file); }));
-      model->setDisplay(readModelDisplay(find(e.references("display"))));
-      model->setStorageFile(fs::absolute(file));
-      node = model;
-    } else if (e.tag == "LinearTransform" || e.tag == "GridTransform" || e.tag == "Transform" ||
-               e.tag == "BSplineTransform") {
-      const fs::path file = storageFileOf(e);
-      auto transform = TransformNode::create(name, withSceneContext([&] { return readTransform(file); }));
-      transform->setStorageFile(fs::absolute(file));
-      node = transform;
-    } else if (e.tag == "MarkupsFiducial") {
-      const fs::path file = storageFileOf(e);
-      const auto attributes = decodeAttributes(e.get("attributes"));
-      auto pairs = attributes.find(PairsAttribute);
-      auto side = attributes.find(SideAttribute);
-      if (pairs == attributes.end() || side == attributes.end()) continue; // a point list that is not a pair set
-      landmarkSides[pairs->second][side->second] = withSceneContext([&] { return readMarkupsJson(file); });
-      if (side->second == "preop") {
-        auto role = attributes.find(RoleAttribute);
-        landmarkInfo[pairs->second] = {id, role != attributes.end() ? role->second : ""};
-        const auto transforms = e.references("transform");
-        if (!transforms.empty()) parentOf[id] = transforms.front();
-      }
-      continue;
-    } else {
-      continue; // display and storage nodes, and node kinds the workflow does not use
-    }
-    auto attributes = decodeAttributes(e.get("attributes"));
-    if (auto role = attributes.find(RoleAttribute); role != attributes.end()) {
-      node->setRole(role->second);
-      attributes.erase(role);
-    }
-    for (const auto& [key, value] : attributes) node->setAttribute(key, value);
-    const auto transforms = e.references("transform");
-    if (!transforms.empty()) parentOf[id] = transforms.front();
-    node->markStored();
-    loaded.emplace_back(id, node);
   }
+};
 
-  for (const auto& [name, sides] : landmarkSides) {
+ParsedScene parseScene(const fs::path& mrmlPath)
+{
+  std::error_code ec;
+  if (!fs::is_regular_file(mrmlPath, ec)) {
+    throw InputError(mrmlPath.string() + ": no such scene file");
+  }
+  vtkNew<vtkXMLDataParser> parser;
+  parser->SetFileName(mrmlPath.c_str());
+  parser->SetIgnoreCharacterData(1);
+  if (!parser->Parse() || !parser->GetRootElement() || std::string(parser->GetRootElement()->GetName()) != "MRML") {
+    throw InputError(mrmlPath.string() + ": not a MRML scene (no <MRML> root element, or malformed XML)");
+  }
+  vtkXMLDataElement* root = parser->GetRootElement();
+  ParsedScene parsed;
+  parsed.mrmlPath = mrmlPath;
+  parsed.sceneFolder = mrmlPath.has_parent_path() ? mrmlPath.parent_path() : fs::path(".");
+  for (int i = 0; i < root->GetNumberOfNestedElements(); ++i) {
+    vtkXMLDataElement* xml = root->GetNestedElement(i);
+    ParsedElement e;
+    e.tag = xml->GetName();
+    for (int a = 0; a < xml->GetNumberOfAttributes(); ++a) e.attributes[xml->GetAttributeName(a)] = xml->GetAttributeValue(a);
+    const std::string id = e.get("id");
+    if (id.empty()) continue;
+    parsed.byId[id] = e;
+    parsed.order.push_back(id);
+  }
+  return parsed;
+}
+
+/// What reading the elements gathers before anything is added to the scene.
+struct SceneReading {
+  std::vector<std::pair<std::string, std::shared_ptr<Node>>> loaded;                   // old id -> node
+  std::map<std::string, std::string> parentOf;                                         // old id -> old parent transform id
+  std::map<std::string, std::map<std::string, std::vector<NamedPoint>>> landmarkSides; // pairs name -> side -> points
+  std::map<std::string, std::pair<std::string, std::string>> landmarkInfo;             // pairs name -> (old id, role)
+};
+
+bool isTransformTag(const std::string& tag)
+{
+  return tag == "LinearTransform" || tag == "GridTransform" || tag == "Transform" || tag == "BSplineTransform";
+}
+
+/// The volume, model or transform node an element describes, with its data read; null for other elements.
+std::shared_ptr<Node> readDataNode(const ParsedScene& parsed, const ParsedElement& e, const std::string& name)
+{
+  std::shared_ptr<Node> node;
+  if (e.tag == "Volume" || e.tag == "LabelMapVolume") {
+    const fs::path file = parsed.storageFileOf(e);
+    const ParsedElement* display = parsed.find(e.references("display"));
+    if (e.tag == "Volume" && e.get("labelMap") != "1") {
+      auto volume = ScalarVolumeNode::create(name, parsed.withSceneContext([&] { return readScalarVolume(file); }));
+      volume->setDisplay(readVolumeDisplay(display, VolumeDisplay{}));
+      node = volume;
+    } else {
+      auto labels = LabelMapVolumeNode::create(name, parsed.withSceneContext([&] { return readLabelVolume(file); }));
+      labels->setDisplay(readVolumeDisplay(display, VolumeDisplay{"Labels", {}, {}, {}, {}, 1.0}));
+      node = labels;
+    }
+    node->setStorageFile(fs::absolute(file));
+  } else if (e.tag == "Model") {
+    const fs::path file = parsed.storageFileOf(e);
+    auto model = ModelNode::create(name, parsed.withSceneContext([&] { return readModel(file); }));
+    model->setDisplay(readModelDisplay(parsed.find(e.references("display"))));
+    model->setStorageFile(fs::absolute(file));
+    node = model;
+  } else if (isTransformTag(e.tag)) {
+    const fs::path file = parsed.storageFileOf(e);
+    auto transform = TransformNode::create(name, parsed.withSceneContext([&] { return readTransform(file); }));
+    transform->setStorageFile(fs::absolute(file));
+    node = transform;
+  }
+  return node;
+}
+
+/// One side of a landmark pair set (a MarkupsFiducial element with the pairs and side attributes;
+/// other point lists are skipped): its points, and from the preoperative side the role and parent.
+void readLandmarkSide(const ParsedScene& parsed, const std::string& id, const ParsedElement& e, SceneReading& reading)
+{
+  const fs::path file = parsed.storageFileOf(e);
+  const auto attributes = decodeAttributes(e.get("attributes"));
+  auto pairs = attributes.find(PairsAttribute);
+  auto side = attributes.find(SideAttribute);
+  if (pairs == attributes.end() || side == attributes.end()) return; // a point list that is not a pair set
+  reading.landmarkSides[pairs->second][side->second] = parsed.withSceneContext([&] { return readMarkupsJson(file); });
+  if (side->second == "preop") {
+    auto role = attributes.find(RoleAttribute);
+    reading.landmarkInfo[pairs->second] = {id, role != attributes.end() ? role->second : ""};
+    const auto transforms = e.references("transform");
+    if (!transforms.empty()) reading.parentOf[id] = transforms.front();
+  }
+}
+
+/// The element's role and attributes onto the node; its parent transform noted.
+void applyElementAttributes(const std::string& id, const ParsedElement& e, Node& node, SceneReading& reading)
+{
+  auto attributes = decodeAttributes(e.get("attributes"));
+  if (auto role = attributes.find(RoleAttribute); role != attributes.end()) {
+    node.setRole(role->second);
+    attributes.erase(role);
+  }
+  for (const auto& [key, value] : attributes) node.setAttribute(key, value);
+  const auto transforms = e.references("transform");
+  if (!transforms.empty()) reading.parentOf[id] = transforms.front();
+}
+
+/// Each landmark pair set from its two point lists, matched by point name.
+void pairLandmarks(const ParsedScene& parsed, SceneReading& reading)
+{
+  for (const auto& [name, sides] : reading.landmarkSides) {
     auto preop = sides.find("preop");
     auto intraop = sides.find("intraop");
     if (preop == sides.end() || intraop == sides.end()) {
-      throw InputError(mrmlPath.string() + ": landmark pairs '" + name + "' lack their " +
+      throw InputError(parsed.mrmlPath.string() + ": landmark pairs '" + name + "' lack their " +
                        (preop == sides.end() ? "preop" : "intraop") + " point list");
     }
     std::map<std::string, PhysicalPoint> intraopByName;
@@ -738,27 +788,31 @@ void readScene(Scene& scene, const fs::path& mrmlPath)
     for (const NamedPoint& p : preop->second) {
       auto match = intraopByName.find(p.name);
       if (match == intraopByName.end()) {
-        throw InputError(mrmlPath.string() + ": landmark '" + p.name + "' of '" + name + "' has no intraop point");
+        throw InputError(parsed.mrmlPath.string() + ": landmark '" + p.name + "' of '" + name + "' has no intraop point");
       }
       pairs.push_back({p.name, p.position, match->second});
     }
     auto node = LandmarksNode::create(name, pairs);
-    node->setRole(landmarkInfo[name].second);
+    node->setRole(reading.landmarkInfo[name].second);
     node->markStored();
-    loaded.emplace_back(landmarkInfo[name].first, node);
+    reading.loaded.emplace_back(reading.landmarkInfo[name].first, node);
   }
+}
 
-  // Everything read: now add, then resolve transform placement to the new ids.
+/// Everything read: adds the nodes to the scene, then resolves transform placement and the slice
+/// view's layers to the new ids.
+void addReadNodes(Scene& scene, const ParsedScene& parsed, const SceneReading& reading)
+{
   std::map<std::string, std::string> newIdOf;
-  for (auto& [oldId, node] : loaded) {
+  for (auto& [oldId, node] : reading.loaded) {
     scene.addNode(node);
     newIdOf[oldId] = node->id();
   }
-  for (auto& [oldId, node] : loaded) {
-    auto parent = parentOf.find(oldId);
-    if (parent != parentOf.end() && newIdOf.count(parent->second)) node->setParentTransformId(newIdOf[parent->second]);
+  for (auto& [oldId, node] : reading.loaded) {
+    auto parent = reading.parentOf.find(oldId);
+    if (parent != reading.parentOf.end() && newIdOf.count(parent->second)) node->setParentTransformId(newIdOf[parent->second]);
   }
-  if (auto layers = readSliceViewLayers(byId)) {
+  if (auto layers = readSliceViewLayers(parsed.byId)) {
     for (std::string* id : {&layers->backgroundVolumeId, &layers->foregroundVolumeId, &layers->labelVolumeId}) {
       // A layer showing a node that was not read (or is no volume) stays empty.
       const auto node = newIdOf.count(*id) ? scene.node(newIdOf[*id]) : nullptr;
@@ -767,6 +821,29 @@ void readScene(Scene& scene, const fs::path& mrmlPath)
     }
     scene.setSliceViewLayers(*layers);
   }
+}
+
+} // namespace
+
+void readScene(Scene& scene, const fs::path& mrmlPath)
+{
+  const ParsedScene parsed = parseScene(mrmlPath);
+  SceneReading reading;
+  for (const std::string& id : parsed.order) {
+    const ParsedElement& e = parsed.byId.at(id);
+    if (e.tag == "MarkupsFiducial") {
+      readLandmarkSide(parsed, id, e, reading);
+      continue;
+    }
+    // Display and storage nodes, and node kinds the workflow does not use, give no node.
+    std::shared_ptr<Node> node = readDataNode(parsed, e, e.get("name", id));
+    if (!node) continue;
+    applyElementAttributes(id, e, *node, reading);
+    node->markStored();
+    reading.loaded.emplace_back(id, node);
+  }
+  pairLandmarks(parsed, reading);
+  addReadNodes(scene, parsed, reading);
 }
 
 } // namespace brainshift

@@ -276,88 +276,84 @@ void SliceView::setCursorPosition(const PhysicalPoint& p)
   renderWindow()->Render();
 }
 
-void SliceView::reslice()
+namespace {
+/// The overlay's colour map over its window: Red (dark red to yellow: angiography), else
+/// ColdToHotRainbow (blue through green to red: statistics).
+void configureOverlayColors(vtkLookupTable* colors, const VolumeDisplay& display, const std::array<double, 2>& range)
 {
-  if (backgroundVolume_.empty() && labelVolume_.empty() && overlayVolume_.empty()) {
-    composed_ = nullptr;
-    imageActor_->VisibilityOff();
-    return;
+  const auto wl = windowLevelOf(display, range);
+  if (display.colorTable == "Red") {
+    colors->SetHueRange(0.0, 0.17);
+    colors->SetValueRange(0.5, 1.0);
+  } else {
+    colors->SetHueRange(0.667, 0.0);
   }
-  const vtkIdType pixels = vtkIdType(plane_.sizeU) * plane_.sizeV;
-  auto valuesOf = [&](const ResliceableVolume& volume) -> vtkSmartPointer<vtkImageData> {
-    return volume.empty() ? nullptr : volume.slice(plane_);
-  };
-  const auto backgroundSlice = valuesOf(backgroundVolume_), labelSlice = valuesOf(labelVolume_), overlaySlice = valuesOf(overlayVolume_);
-  const bool comparing = comparisonMode_ != ComparisonMode::Off && !comparisonVolume_.empty() && !backgroundVolume_.empty();
-  const auto comparisonSlice = comparing ? comparisonVolume_.slice(plane_) : nullptr;
-  auto scalars = [](const vtkSmartPointer<vtkImageData>& image) {
-    return image ? static_cast<const float*>(image->GetScalarPointer()) : nullptr;
-  };
-  const float* background = scalars(backgroundSlice);
-  const float* labels = scalars(labelSlice);
-  const float* overlay = scalars(overlaySlice);
-  const float* comparison = scalars(comparisonSlice);
+  colors->SetTableRange(wl[1] - 0.5 * wl[0], wl[1] + 0.5 * wl[0]);
+  colors->Build();
+}
 
-  vtkNew<vtkLookupTable> overlayColors; // ColdToHotRainbow: blue through green to red (statistics);
-  VolumeDisplay overlayDisplay;          // Red: dark red to yellow (angiography)
-  if (overlay) {
-    overlayDisplay = overlay_->display();
-    const auto wl = windowLevelOf(overlayDisplay, overlayRange_);
-    if (overlayDisplay.colorTable == "Red") {
-      overlayColors->SetHueRange(0.0, 0.17);
-      overlayColors->SetValueRange(0.5, 1.0);
-    } else {
-      overlayColors->SetHueRange(0.667, 0.0);
-    }
-    overlayColors->SetTableRange(wl[1] - 0.5 * wl[0], wl[1] + 0.5 * wl[0]);
-    overlayColors->Build();
-  }
-  const double labelOpacity = labelMap_ ? labelOpacity_ * labelMap_->display().opacity : 0.0;
-  const double low = level_ - 0.5 * window_;
+/// How one slice's pixels are composed, bottom to top: the grey background (or its comparison
+/// with another volume), the labels (filled or as outlines), the overlay where shown.
+struct SliceCompositor {
+  const SlicePlane& plane;
+  const float* background;
+  const float* labels;
+  const float* overlay;
+  const float* comparison;
+  ComparisonMode comparisonMode;
+  double checkerSize;
+  bool flickerShowsComparison;
+  double window, low;
+  double labelOpacity;
+  bool labelOutline;
+  vtkLookupTable* overlayColors;
+  const VolumeDisplay& overlayDisplay;
 
-  auto composed = vtkSmartPointer<vtkImageData>::New();
-  composed->SetDimensions(plane_.sizeU, plane_.sizeV, 1);
-  composed->SetOrigin(plane_.originU, plane_.originV, 0.0);
-  composed->SetSpacing(plane_.spacing, plane_.spacing, 1.0);
-  composed->AllocateScalars(VTK_UNSIGNED_CHAR, 4);
-  auto* rgba = static_cast<unsigned char*>(composed->GetScalarPointer());
-  // A label pixel of an outline has a 4-neighbour with another label (or the slice's edge).
-  auto onOutline = [&](vtkIdType i) {
-    const int u = int(i % plane_.sizeU), v = int(i / plane_.sizeU);
+  /// A label pixel of an outline has a 4-neighbour with another label (or the slice's edge).
+  bool onOutline(vtkIdType i) const
+  {
+    const int u = int(i % plane.sizeU), v = int(i / plane.sizeU);
     const float label = labels[i];
-    if (u == 0 || v == 0 || u == plane_.sizeU - 1 || v == plane_.sizeV - 1) return true;
-    return labels[i - 1] != label || labels[i + 1] != label || labels[i - plane_.sizeU] != label || labels[i + plane_.sizeU] != label;
-  };
-  for (vtkIdType i = 0; i < pixels; ++i, rgba += 4) {
+    if (u == 0 || v == 0 || u == plane.sizeU - 1 || v == plane.sizeV - 1) return true;
+    return labels[i - 1] != label || labels[i + 1] != label || labels[i - plane.sizeU] != label || labels[i + plane.sizeU] != label;
+  }
+
+  /// The background value shown at pixel i in the comparison mode.
+  double comparedValue(vtkIdType i, double value) const
+  {
+    const double other = comparison[i];
+    switch (comparisonMode) {
+    case ComparisonMode::Checkerboard: {
+      const int u = int(i % plane.sizeU), v = int(i / plane.sizeU);
+      const long column = long(std::floor((plane.originU + u * plane.spacing) / checkerSize));
+      const long row = long(std::floor((plane.originV + v * plane.spacing) / checkerSize));
+      if ((column + row) % 2 != 0) value = other;
+      break;
+    }
+    case ComparisonMode::Flicker:
+      if (flickerShowsComparison) value = other;
+      break;
+    case ComparisonMode::Difference:
+      value = std::isfinite(value) && std::isfinite(other) ? value - other : std::numeric_limits<double>::quiet_NaN();
+      break;
+    case ComparisonMode::Off: break;
+    }
+    return value;
+  }
+
+  void compose(vtkIdType i, unsigned char* rgba) const
+  {
     rgba[0] = rgba[1] = rgba[2] = rgba[3] = 0;
     double value = background ? background[i] : std::numeric_limits<double>::quiet_NaN();
     double shade = 0.0; // 0..1
-    if (comparison) {
-      const double other = comparison[i];
-      switch (comparisonMode_) {
-      case ComparisonMode::Checkerboard: {
-        const int u = int(i % plane_.sizeU), v = int(i / plane_.sizeU);
-        const long column = long(std::floor((plane_.originU + u * plane_.spacing) / checkerSize_));
-        const long row = long(std::floor((plane_.originV + v * plane_.spacing) / checkerSize_));
-        if ((column + row) % 2 != 0) value = other;
-        break;
-      }
-      case ComparisonMode::Flicker:
-        if (flickerShowsComparison_) value = other;
-        break;
-      case ComparisonMode::Difference:
-        value = std::isfinite(value) && std::isfinite(other) ? value - other : std::numeric_limits<double>::quiet_NaN();
-        break;
-      case ComparisonMode::Off: break;
-      }
-    }
+    if (comparison) value = comparedValue(i, value);
     if (std::isfinite(value)) {
-      shade = comparison && comparisonMode_ == ComparisonMode::Difference ? 0.5 + value / window_ : (value - low) / window_;
+      shade = comparison && comparisonMode == ComparisonMode::Difference ? 0.5 + value / window : (value - low) / window;
       const auto grey = (unsigned char)std::lround(255.0 * std::clamp(shade, 0.0, 1.0));
       rgba[0] = rgba[1] = rgba[2] = grey;
       rgba[3] = 255;
     }
-    if (labels && std::isfinite(labels[i]) && labels[i] > 0.5 && labelOpacity > 0 && (!labelOutline_ || onOutline(i))) {
+    if (labels && std::isfinite(labels[i]) && labels[i] > 0.5 && labelOpacity > 0 && (!labelOutline || onOutline(i))) {
       const auto color = labelColor(int(std::lround(labels[i])));
       blend(rgba, color.data(), labelOpacity);
     }
@@ -373,6 +369,46 @@ void SliceView::reslice()
       }
     }
   }
+};
+
+const float* scalarsOf(const vtkSmartPointer<vtkImageData>& image)
+{
+  return image ? static_cast<const float*>(image->GetScalarPointer()) : nullptr;
+}
+} // namespace
+
+void SliceView::reslice()
+{
+  if (backgroundVolume_.empty() && labelVolume_.empty() && overlayVolume_.empty()) {
+    composed_ = nullptr;
+    imageActor_->VisibilityOff();
+    return;
+  }
+  const vtkIdType pixels = vtkIdType(plane_.sizeU) * plane_.sizeV;
+  auto valuesOf = [&](const ResliceableVolume& volume) -> vtkSmartPointer<vtkImageData> {
+    return volume.empty() ? nullptr : volume.slice(plane_);
+  };
+  const auto backgroundSlice = valuesOf(backgroundVolume_), labelSlice = valuesOf(labelVolume_), overlaySlice = valuesOf(overlayVolume_);
+  const bool comparing = comparisonMode_ != ComparisonMode::Off && !comparisonVolume_.empty() && !backgroundVolume_.empty();
+  const auto comparisonSlice = comparing ? comparisonVolume_.slice(plane_) : nullptr;
+  const float* overlay = scalarsOf(overlaySlice);
+  vtkNew<vtkLookupTable> overlayColors;
+  VolumeDisplay overlayDisplay;
+  if (overlay) {
+    overlayDisplay = overlay_->display();
+    configureOverlayColors(overlayColors, overlayDisplay, overlayRange_);
+  }
+  const double labelOpacity = labelMap_ ? labelOpacity_ * labelMap_->display().opacity : 0.0;
+  const SliceCompositor compositor{plane_, scalarsOf(backgroundSlice), scalarsOf(labelSlice), overlay, scalarsOf(comparisonSlice),
+                                  comparisonMode_, checkerSize_, flickerShowsComparison_, window_, level_ - 0.5 * window_,
+                                  labelOpacity, labelOutline_, overlayColors, overlayDisplay};
+  auto composed = vtkSmartPointer<vtkImageData>::New();
+  composed->SetDimensions(plane_.sizeU, plane_.sizeV, 1);
+  composed->SetOrigin(plane_.originU, plane_.originV, 0.0);
+  composed->SetSpacing(plane_.spacing, plane_.spacing, 1.0);
+  composed->AllocateScalars(VTK_UNSIGNED_CHAR, 4);
+  auto* rgba = static_cast<unsigned char*>(composed->GetScalarPointer());
+  for (vtkIdType i = 0; i < pixels; ++i, rgba += 4) compositor.compose(i, rgba);
   composed_ = composed;
   imageActor_->SetInputData(composed_);
   imageActor_->VisibilityOn();

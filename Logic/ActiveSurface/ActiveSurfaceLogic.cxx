@@ -136,25 +136,13 @@ private:
   long size_[3];
 };
 
-/// The target: the intraoperative brain as one solid (the largest 6-connected component of the
-/// brain labels, its enclosed holes such as a resection cavity filled).
-MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>& brain, const std::string& labelsName,
-                                   Warnings& warnings)
-{
-  const auto size = labels.GetLargestPossibleRegion().GetSize();
-  const long nx = long(size[0]), ny = long(size[1]), nz = long(size[2]);
-  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
-  const LabelPixel* l = labels.GetBufferPointer();
-  std::vector<unsigned char> inBrain(n, 0);
-  std::size_t brainVoxels = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (brain.count(l[i])) {
-      inBrain[i] = 1;
-      ++brainVoxels;
-    }
-  }
-  if (brainVoxels == 0) throw InputError(labelsName + ": the intraoperative segmentation holds no brain (labels 2-4)");
-  auto neighbours = [&](std::size_t i, auto&& visit) {
+/// A label map's voxel grid: its 6-neighbours of a voxel (by linear index).
+struct VoxelGrid {
+  long nx, ny, nz;
+
+  template <class Visit>
+  void forEachNeighbour(std::size_t i, Visit&& visit) const
+  {
     const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
     if (x > 0) visit(i - 1);
     if (x + 1 < nx) visit(i + 1);
@@ -162,34 +150,59 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
     if (y + 1 < ny) visit(i + std::size_t(nx));
     if (z > 0) visit(i - std::size_t(nx * ny));
     if (z + 1 < nz) visit(i + std::size_t(nx * ny));
-  };
-  // Components of the brain, in voxel order (deterministic); keep the largest.
-  std::vector<int> component(n, 0);
+  }
+  bool onBorder(std::size_t i) const
+  {
+    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
+    return x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+  }
+};
+
+/// The 6-connected components of the brain voxels, numbered from 1 in voxel order (deterministic;
+/// 0: not brain), with their sizes (componentSize[0] unused).
+struct BrainComponents {
+  std::vector<int> component;
   std::vector<std::size_t> componentSize{0};
+  int largest = 0;
+};
+
+BrainComponents brainComponentsOf(const std::vector<unsigned char>& inBrain, const VoxelGrid& grid)
+{
+  const std::size_t n = inBrain.size();
+  BrainComponents components;
+  components.component.assign(n, 0);
   std::vector<std::size_t> queue;
   for (std::size_t seed = 0; seed < n; ++seed) {
-    if (!inBrain[seed] || component[seed]) continue;
-    const int id = int(componentSize.size());
-    componentSize.push_back(0);
+    if (!inBrain[seed] || components.component[seed]) continue;
+    const int id = int(components.componentSize.size());
+    components.componentSize.push_back(0);
     queue.assign(1, seed);
-    component[seed] = id;
+    components.component[seed] = id;
     while (!queue.empty()) {
       const std::size_t i = queue.back();
       queue.pop_back();
-      ++componentSize[std::size_t(id)];
-      neighbours(i, [&](std::size_t j) {
-        if (inBrain[j] && !component[j]) {
-          component[j] = id;
+      ++components.componentSize[std::size_t(id)];
+      grid.forEachNeighbour(i, [&](std::size_t j) {
+        if (inBrain[j] && !components.component[j]) {
+          components.component[j] = id;
           queue.push_back(j);
         }
       });
     }
   }
-  const int largest = int(std::max_element(componentSize.begin(), componentSize.end()) - componentSize.begin());
-  const double keptFraction = double(componentSize[std::size_t(largest)]) / double(brainVoxels);
+  const auto& sizes = components.componentSize;
+  components.largest = int(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+  return components;
+}
+
+/// Refuses (InputError) a brain in two large pieces (the next holds more than a fifth); warns
+/// when more than 1 % lies apart from the largest piece.
+void requireOneBrain(const BrainComponents& components, std::size_t brainVoxels, const std::string& labelsName, Warnings& warnings)
+{
+  const double keptFraction = double(components.componentSize[std::size_t(components.largest)]) / double(brainVoxels);
   std::size_t secondLargest = 0;
-  for (std::size_t c = 1; c < componentSize.size(); ++c) {
-    if (int(c) != largest) secondLargest = std::max(secondLargest, componentSize[c]);
+  for (std::size_t c = 1; c < components.componentSize.size(); ++c) {
+    if (int(c) != components.largest) secondLargest = std::max(secondLargest, components.componentSize[c]);
   }
   if (double(secondLargest) > 0.2 * double(brainVoxels)) {
     std::ostringstream m;
@@ -204,13 +217,18 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
       << " % of the intraoperative brain is in pieces apart from the brain; they are ignored";
     warnings.push_back(w.str());
   }
-  // Fill what the outside cannot reach: the cavity, enclosed holes.
+}
+
+/// What the outside reaches from the grid's border without crossing the largest brain component:
+/// everything else (the brain, the cavity, enclosed holes) is the filled brain.
+std::vector<unsigned char> reachableFromOutside(const BrainComponents& components, const VoxelGrid& grid)
+{
+  const std::size_t n = components.component.size();
+  const int largest = components.largest;
   std::vector<unsigned char> outside(n, 0);
-  queue.clear();
+  std::vector<std::size_t> queue;
   for (std::size_t i = 0; i < n; ++i) {
-    const long x = long(i % std::size_t(nx)), y = long((i / std::size_t(nx)) % std::size_t(ny)), z = long(i / std::size_t(nx * ny));
-    const bool border = x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
-    if (border && component[i] != largest) {
+    if (grid.onBorder(i) && components.component[i] != largest) {
       outside[i] = 1;
       queue.push_back(i);
     }
@@ -218,13 +236,37 @@ MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>
   while (!queue.empty()) {
     const std::size_t i = queue.back();
     queue.pop_back();
-    neighbours(i, [&](std::size_t j) {
-      if (!outside[j] && component[j] != largest) {
+    grid.forEachNeighbour(i, [&](std::size_t j) {
+      if (!outside[j] && components.component[j] != largest) {
         outside[j] = 1;
         queue.push_back(j);
       }
     });
   }
+  return outside;
+}
+
+/// The target: the intraoperative brain as one solid (the largest 6-connected component of the
+/// brain labels, its enclosed holes such as a resection cavity filled).
+MaskImage::Pointer targetBrainMask(const LabelImage& labels, const std::set<int>& brain, const std::string& labelsName,
+                                   Warnings& warnings)
+{
+  const auto size = labels.GetLargestPossibleRegion().GetSize();
+  const VoxelGrid grid{long(size[0]), long(size[1]), long(size[2])};
+  const std::size_t n = labels.GetLargestPossibleRegion().GetNumberOfPixels();
+  const LabelPixel* l = labels.GetBufferPointer();
+  std::vector<unsigned char> inBrain(n, 0);
+  std::size_t brainVoxels = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (brain.count(l[i])) {
+      inBrain[i] = 1;
+      ++brainVoxels;
+    }
+  }
+  if (brainVoxels == 0) throw InputError(labelsName + ": the intraoperative segmentation holds no brain (labels 2-4)");
+  const BrainComponents components = brainComponentsOf(inBrain, grid);
+  requireOneBrain(components, brainVoxels, labelsName, warnings);
+  const std::vector<unsigned char> outside = reachableFromOutside(components, grid);
   auto mask = MaskImage::New();
   mask->SetRegions(labels.GetLargestPossibleRegion());
   mask->CopyInformation(&labels);
@@ -562,122 +604,173 @@ void nearestEdge(const ImageEdgeTerm& edges, const OutsideSide& side, const Vec&
   }
 }
 
+/// The active surface's iterations (see fitSurface): the state shared by its steps.
+class SurfaceFit {
+public:
+  SurfaceFit(const MembraneStep& membrane, const Eigen::MatrixXd& rest, const TrilinearVolume& field, const PreopToIntraopIndex& toIndex,
+             const ImageEdgeTerm* edges, const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+             const PointTargets* targets)
+    : membrane_(membrane), rest_(rest), field_(field), toIndex_(toIndex), edges_(edges), freeReason_(freeReason), p_(p),
+      targets_(targets), n_(rest.rows()), force_(n_, 3), plausible_(std::size_t(n_), -1)
+  {
+    out_.residuals.assign(std::size_t(n_), 0.0);
+    out_.imageUsed.assign(std::size_t(n_), false);
+  }
+
+  FitOutcome run(const Eigen::MatrixXd* start);
+
+private:
+  Vec pull(Eigen::Index node, const Vec& x, double& residual, bool& imageUsed);
+  double imageTarget(Eigen::Index node, const Vec& index, const Vec& direction, double target, double& residual, bool& imageUsed);
+  void computeForces();
+  bool settled(const Eigen::VectorXd& moves, std::vector<double>& recentMean) const;
+
+  const MembraneStep& membrane_;
+  const Eigen::MatrixXd& rest_;
+  const TrilinearVolume& field_;
+  const PreopToIntraopIndex& toIndex_;
+  const ImageEdgeTerm* edges_;
+  const std::vector<unsigned char>& freeReason_;
+  const ActiveSurfaceParameters& p_;
+  const PointTargets* targets_;
+  const Eigen::Index n_;
+  FitOutcome out_;
+  Eigen::MatrixXd v_, force_;
+  // Whether the segmentation looks right at a node is decided every few iterations, not at every
+  // step: a node on the fence between the two would otherwise dither and never settle.
+  std::vector<signed char> plausible_;
+  bool refreshPlausibility_ = true;
+};
+
+/// The pull on a node at x: along the distance map's gradient (outward), to the target boundary
+/// (the segmentation's, or the image's edge where the image term decides), at most the largest step.
+Vec SurfaceFit::pull(Eigen::Index node, const Vec& x, double& residual, bool& imageUsed)
+{
+  imageUsed = false;
+  const Vec index = toIndex_(x);
+  Vec gradient;
+  const double d = field_.value(index, &gradient);
+  residual = std::abs(d);
+  Vec direction = toIndex_.gradientToPreop(gradient);
+  const double length = direction.norm();
+  if (!(length > 1e-6)) return Vec::Zero();
+  direction /= length;
+  double target = -d; // along `direction` (outward): the segmentation's boundary
+  if (edges_) target = imageTarget(node, index, direction, target, residual, imageUsed);
+  return std::clamp(target, -p_.maximumStepMm, p_.maximumStepMm) * direction;
+}
+
+/// The image term's say on the target along the normal. The expected contrast checks the
+/// segmentation: across its boundary the mean intensity of a few mm inside and of a few mm outside
+/// must differ as brain and its surroundings do (a local test, so a bias field does not upset it).
+/// Where it fails, the segmentation is wrong here (grown into fluid, or eroded into brain) and the
+/// image alone decides.
+double SurfaceFit::imageTarget(Eigen::Index node, const Vec& index, const Vec& direction, double target, double& residual,
+                               bool& imageUsed)
+{
+  const double step = 0.5; // the crossing is interpolated within a step
+  const Vec indexStep = toIndex_.matrix * direction * step;
+  signed char& known = plausible_[std::size_t(node)];
+  if (refreshPlausibility_ || known < 0) known = showsExpectedContrast(*edges_, index, indexStep, target, step, p_);
+  const bool segmentationPlausible = known == 1;
+  if (segmentationPlausible && !(p_.imageWeight > 0)) return target; // no edge needed
+  // The image's edge nearest to the node: inside-like to outside-like along the normal.
+  double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
+  for (const OutsideSide& side : edges_->sides) nearestEdge(*edges_, side, index, indexStep, step, p_.imageSearchMm, edgeAt, edgeDistance);
+  const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
+  if (segmentationPlausible) {
+    if (p_.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p_.imageTrustMm) {
+      target = (1 - p_.imageWeight) * target + p_.imageWeight * edgeAt;
+      imageUsed = true;
+    }
+  } else if (!p_.imageRescue) {
+    // the segmentation is followed anyway
+  } else if (edgeFound) {
+    target = edgeAt;
+    residual = std::abs(edgeAt); // the node is matched to the image's edge
+    imageUsed = true;
+  } else {
+    target = 0; // neither is to be trusted: the membrane carries the node
+  }
+  return target;
+}
+
+void SurfaceFit::computeForces()
+{
+  for (Eigen::Index i = 0; i < n_; ++i) {
+    if (freeReason_[std::size_t(i)] == ResectedTumour || freeReason_[std::size_t(i)] == OutsideImage) {
+      force_.row(i).setZero();
+      continue;
+    }
+    if (freeReason_[std::size_t(i)] == HeldOutsideImage) { // back to rest: the skull holds it
+      const double length = v_.row(i).norm();
+      force_.row(i) = length > p_.maximumStepMm ? Eigen::RowVector3d(-v_.row(i) * (p_.maximumStepMm / length)) : Eigen::RowVector3d(-v_.row(i));
+      continue;
+    }
+    bool image = false;
+    const Vec x = rest_.row(i).transpose() + v_.row(i).transpose();
+    Vec f = pull(i, x, out_.residuals[std::size_t(i)], image);
+    if (targets_ && targets_->used[std::size_t(i)]) {
+      const Vec towards = targets_->points[std::size_t(i)] - x;
+      const double length = towards.norm();
+      f = length > p_.maximumStepMm ? Vec(towards * (p_.maximumStepMm / length)) : towards;
+      image = false;
+    }
+    out_.imageUsed[std::size_t(i)] = image;
+    force_.row(i) = f.transpose();
+  }
+}
+
+/// Converged when nearly every node has stopped (a few may dither on a voxel's edge: the 95th
+/// percentile of the moves), or when the surface as a whole has stopped and only a few nodes dither
+/// between an edge and the segmentation: the mean movement over the last five steps is below half
+/// the threshold (after 30 iterations).
+bool SurfaceFit::settled(const Eigen::VectorXd& moves, std::vector<double>& recentMean) const
+{
+  std::vector<double> sortedMoves(moves.data(), moves.data() + moves.size());
+  auto at95 = sortedMoves.begin() + std::ptrdiff_t(0.95 * double(sortedMoves.size() - 1));
+  std::nth_element(sortedMoves.begin(), at95, sortedMoves.end());
+  const double movement = *at95;
+  recentMean.push_back(moves.mean());
+  bool quiet = false;
+  if (recentMean.size() >= 5 && out_.iterations >= 30) {
+    double sum = 0;
+    for (std::size_t k = recentMean.size() - 5; k < recentMean.size(); ++k) sum += recentMean[k];
+    quiet = sum / 5.0 < 0.5 * p_.convergenceMm;
+  }
+  return movement < p_.convergenceMm || quiet;
+}
+
+FitOutcome SurfaceFit::run(const Eigen::MatrixXd* start)
+{
+  v_ = start ? *start : Eigen::MatrixXd::Zero(n_, 3);
+  computeForces();
+  std::vector<double> recentMean;
+  for (out_.iterations = 1; out_.iterations <= p_.maximumIterations; ++out_.iterations) {
+    throwIfCancelled(p_.cancel, "the active surface");
+    const Eigen::MatrixXd next = membrane_.solve(v_ + p_.timeStep * force_);
+    const Eigen::VectorXd moves = (next - v_).rowwise().norm();
+    v_ = next;
+    refreshPlausibility_ = out_.iterations % 10 == 0;
+    computeForces();
+    refreshPlausibility_ = false;
+    if (settled(moves, recentMean)) {
+      out_.converged = true;
+      break;
+    }
+  }
+  out_.iterations = std::min(out_.iterations, p_.maximumIterations);
+  out_.positions = rest_ + v_;
+  out_.plausible = edges_ ? plausible_ : std::vector<signed char>(std::size_t(n_), -1);
+  return out_;
+}
+
 FitOutcome fitSurface(const MembraneStep& membrane, const Eigen::MatrixXd& rest,
                       const TrilinearVolume& field, const PreopToIntraopIndex& toIndex, const ImageEdgeTerm* edges,
                       const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
                       const Eigen::MatrixXd* start = nullptr, const PointTargets* targets = nullptr)
 {
-  const Eigen::Index n = rest.rows();
-  FitOutcome out;
-  out.residuals.assign(std::size_t(n), 0.0);
-  out.imageUsed.assign(std::size_t(n), false);
-  Eigen::MatrixXd v = start ? *start : Eigen::MatrixXd::Zero(n, 3), force(n, 3);
-  // Whether the segmentation looks right at a node is decided every few iterations, not at every
-  // step: a node on the fence between the two would otherwise dither and never settle.
-  std::vector<signed char> plausible(std::size_t(n), -1);
-  bool refreshPlausibility = true;
-  auto pull = [&](Eigen::Index node, const Vec& x, double& residual, bool& imageUsed) -> Vec {
-    imageUsed = false;
-    const Vec index = toIndex(x);
-    Vec gradient;
-    const double d = field.value(index, &gradient);
-    residual = std::abs(d);
-    Vec direction = toIndex.gradientToPreop(gradient);
-    const double length = direction.norm();
-    if (!(length > 1e-6)) return Vec::Zero();
-    direction /= length;
-    double target = -d; // along `direction` (outward): the segmentation's boundary
-    if (edges) {
-      const double step = 0.5; // the crossing is interpolated within a step
-      const Vec indexStep = toIndex.matrix * direction * step;
-      // The expected contrast checks the segmentation: across its boundary the mean intensity of a
-      // few mm inside and of a few mm outside must differ as brain and its surroundings do (a
-      // local test, so a bias field does not upset it). Where it fails, the segmentation is wrong
-      // here (grown into fluid, or eroded into brain) and the image alone decides.
-      signed char& known = plausible[std::size_t(node)];
-      if (refreshPlausibility || known < 0) known = showsExpectedContrast(*edges, index, indexStep, target, step, p);
-      const bool segmentationPlausible = known == 1;
-      if (segmentationPlausible && !(p.imageWeight > 0)) {
-        return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction; // no edge needed
-      }
-      // The image's edge nearest to the node: inside-like to outside-like along the normal.
-      double edgeAt = 0, edgeDistance = std::numeric_limits<double>::infinity();
-      for (const OutsideSide& side : edges->sides) nearestEdge(*edges, side, index, indexStep, step, p.imageSearchMm, edgeAt, edgeDistance);
-      const bool edgeFound = edgeDistance < std::numeric_limits<double>::infinity();
-      if (segmentationPlausible) {
-        if (p.imageWeight > 0 && edgeFound && std::abs(edgeAt - target) <= p.imageTrustMm) {
-          target = (1 - p.imageWeight) * target + p.imageWeight * edgeAt;
-          imageUsed = true;
-        }
-      } else if (!p.imageRescue) {
-        // the segmentation is followed anyway
-      } else if (edgeFound) {
-        target = edgeAt;
-        residual = std::abs(edgeAt); // the node is matched to the image's edge
-        imageUsed = true;
-      } else {
-        target = 0; // neither is to be trusted: the membrane carries the node
-      }
-    }
-    return std::clamp(target, -p.maximumStepMm, p.maximumStepMm) * direction;
-  };
-  auto computeForces = [&]() {
-    for (Eigen::Index i = 0; i < n; ++i) {
-      if (freeReason[std::size_t(i)] == ResectedTumour || freeReason[std::size_t(i)] == OutsideImage) {
-        force.row(i).setZero();
-        continue;
-      }
-      if (freeReason[std::size_t(i)] == HeldOutsideImage) { // back to rest: the skull holds it
-        const double length = v.row(i).norm();
-        force.row(i) = length > p.maximumStepMm ? Eigen::RowVector3d(-v.row(i) * (p.maximumStepMm / length)) : Eigen::RowVector3d(-v.row(i));
-        continue;
-      }
-      bool image = false;
-      const Vec x = rest.row(i).transpose() + v.row(i).transpose();
-      Vec f = pull(i, x, out.residuals[std::size_t(i)], image);
-      if (targets && targets->used[std::size_t(i)]) {
-        const Vec towards = targets->points[std::size_t(i)] - x;
-        const double length = towards.norm();
-        f = length > p.maximumStepMm ? Vec(towards * (p.maximumStepMm / length)) : towards;
-        image = false;
-      }
-      out.imageUsed[std::size_t(i)] = image;
-      force.row(i) = f.transpose();
-    }
-  };
-  computeForces();
-  std::vector<double> recentMean;
-  for (out.iterations = 1; out.iterations <= p.maximumIterations; ++out.iterations) {
-    throwIfCancelled(p.cancel, "the active surface");
-    const Eigen::MatrixXd next = membrane.solve(v + p.timeStep * force);
-    const Eigen::VectorXd moves = (next - v).rowwise().norm();
-    v = next;
-    refreshPlausibility = out.iterations % 10 == 0;
-    computeForces();
-    refreshPlausibility = false;
-    // Converged when nearly every node has stopped (a few may dither on a voxel's edge).
-    std::vector<double> sortedMoves(moves.data(), moves.data() + moves.size());
-    auto at95 = sortedMoves.begin() + std::ptrdiff_t(0.95 * double(sortedMoves.size() - 1));
-    std::nth_element(sortedMoves.begin(), at95, sortedMoves.end());
-    const double movement = *at95;
-    recentMean.push_back(moves.mean());
-    // Or when the surface as a whole has stopped and only a few nodes dither between an edge and
-    // the segmentation: the mean movement over the last five steps is below half the threshold.
-    bool settled = false;
-    if (recentMean.size() >= 5 && out.iterations >= 30) {
-      double sum = 0;
-      for (std::size_t k = recentMean.size() - 5; k < recentMean.size(); ++k) sum += recentMean[k];
-      settled = sum / 5.0 < 0.5 * p.convergenceMm;
-    }
-    if (movement < p.convergenceMm || settled) {
-      out.converged = true;
-      break;
-    }
-  }
-  out.iterations = std::min(out.iterations, p.maximumIterations);
-  out.positions = rest + v;
-  out.plausible = edges ? plausible : std::vector<signed char>(std::size_t(n), -1);
-  return out;
+  return SurfaceFit(membrane, rest, field, toIndex, edges, freeReason, p, targets).run(start);
 }
 } // namespace
 
@@ -817,221 +910,275 @@ void ActiveSurfaceParameters::validate() const
   require(!brainLabels.empty(), "no brain labels");
 }
 
-ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
-                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
-                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
-                                       vtkPolyData* previousSurface)
-{
-  p.validate();
-  ActiveSurfaceResult result;
-  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError(names.rigid + ": the rigid transform is not linear");
-  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
-  if (intraopImage && !grid.sameGridAs(ImageGeometry::of(intraopImage))) {
-    throw InputError(names.labels + ": not on the intraoperative image's grid (" + grid.describe() + " against " +
-                     ImageGeometry::of(intraopImage).describe() + ")");
-  }
-  vtkDataArray* cellLabels = mesh->GetCellData()->GetArray("Label");
-  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+namespace {
 
-  // -- The preoperative brain surface, and what is known of its nodes.
-  std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
-  std::map<int, double> meshVolumeMl;
+/// What the stage needs of the preoperative mesh: each label's volume (ml), the tumour's nodes and
+/// the brain labels it holds.
+struct MeshContents {
+  std::map<int, double> volumeMl;
   std::set<vtkIdType> tumourNodes;
-  {
-    vtkNew<vtkIdList> ids;
-    for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
-      const int label = int(std::lround(cellLabels->GetComponent(c, 0)));
-      mesh->GetCellPoints(c, ids);
-      if (ids->GetNumberOfIds() != 4) throw InputError(names.mesh + ": cell " + std::to_string(c) + " is not a tetrahedron");
-      double q[4][3];
-      for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v]);
-      Vec a(q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]), b(q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]),
-        e(q[3][0] - q[0][0], q[3][1] - q[0][1], q[3][2] - q[0][2]);
-      meshVolumeMl[label] += std::abs(a.dot(b.cross(e))) / 6000.0;
-      if (label == p.tumourLabel) {
-        for (vtkIdType v = 0; v < 4; ++v) tumourNodes.insert(ids->GetId(v));
-      }
-    }
-  }
   std::set<int> meshedBrain;
+};
+
+MeshContents meshContentsOf(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const std::set<int>& brain,
+                            const ActiveSurfaceParameters& p, const std::string& meshName)
+{
+  MeshContents contents;
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    const int label = int(std::lround(cellLabels->GetComponent(c, 0)));
+    mesh->GetCellPoints(c, ids);
+    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
+    double q[4][3];
+    for (int v = 0; v < 4; ++v) mesh->GetPoint(ids->GetId(v), q[v]);
+    Vec a(q[1][0] - q[0][0], q[1][1] - q[0][1], q[1][2] - q[0][2]), b(q[2][0] - q[0][0], q[2][1] - q[0][1], q[2][2] - q[0][2]),
+      e(q[3][0] - q[0][0], q[3][1] - q[0][1], q[3][2] - q[0][2]);
+    contents.volumeMl[label] += std::abs(a.dot(b.cross(e))) / 6000.0;
+    if (label == p.tumourLabel) {
+      for (vtkIdType v = 0; v < 4; ++v) contents.tumourNodes.insert(ids->GetId(v));
+    }
+  }
   for (int l : brain) {
-    if (meshVolumeMl.count(l)) meshedBrain.insert(l);
+    if (contents.volumeMl.count(l)) contents.meshedBrain.insert(l);
   }
-  if (meshedBrain.empty()) throw InputError(names.mesh + ": the mesh holds none of the brain labels (2, 3, 4)");
-  vtkSmartPointer<vtkPolyData> initial = boundarySurface(mesh, meshedBrain);
-  const SurfaceTopology topology = topologyOf(initial, names.mesh);
-  const std::size_t n = std::size_t(initial->GetNumberOfPoints());
-  if (n < 4) throw InputError(names.mesh + ": the brain surface of the mesh is empty");
-  vtkDataArray* meshNodeIds = initial->GetPointData()->GetArray("MeshNodeId");
-  std::vector<Vec> x0(n);
-  for (std::size_t i = 0; i < n; ++i) initial->GetPoint(vtkIdType(i), x0[i].data());
+  if (contents.meshedBrain.empty()) throw InputError(meshName + ": the mesh holds none of the brain labels (2, 3, 4)");
+  return contents;
+}
 
-  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
-  using SparseMatrix = Eigen::SparseMatrix<double>;
+/// The preoperative brain surface of the mesh: its polygons, triangles and edges, its points and
+/// the mesh node of each.
+struct BrainSurface {
+  vtkSmartPointer<vtkPolyData> polyData;
+  SurfaceTopology topology;
+  vtkDataArray* meshNodeIds = nullptr;
+  std::vector<Vec> points;
+
+  std::size_t size() const { return points.size(); }
+  long meshNode(std::size_t i) const { return std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)); }
+};
+
+BrainSurface brainSurfaceOf(vtkUnstructuredGrid* mesh, const std::set<int>& meshedBrain, const std::string& meshName)
+{
+  BrainSurface surface;
+  surface.polyData = boundarySurface(mesh, meshedBrain);
+  surface.topology = topologyOf(surface.polyData, meshName);
+  const std::size_t n = std::size_t(surface.polyData->GetNumberOfPoints());
+  if (n < 4) throw InputError(meshName + ": the brain surface of the mesh is empty");
+  surface.meshNodeIds = surface.polyData->GetPointData()->GetArray("MeshNodeId");
+  surface.points.resize(n);
+  for (std::size_t i = 0; i < n; ++i) surface.polyData->GetPoint(vtkIdType(i), surface.points[i].data());
+  return surface;
+}
+
+/// K, the surface's graph Laplacian: each node's degree on the diagonal, -1 for each edge.
+Eigen::SparseMatrix<double> graphLaplacian(const SurfaceTopology& topology, std::size_t n)
+{
   const Eigen::Index size = Eigen::Index(n);
-  SparseMatrix laplacian(size, size);
-  {
-    std::vector<Eigen::Triplet<double>> entries;
-    std::vector<double> degree(n, 0);
-    for (const auto& [a, b] : topology.edges) {
-      entries.emplace_back(a, b, -1.0);
-      entries.emplace_back(b, a, -1.0);
-      degree[std::size_t(a)] += 1;
-      degree[std::size_t(b)] += 1;
-    }
-    for (std::size_t i = 0; i < n; ++i) entries.emplace_back(Eigen::Index(i), Eigen::Index(i), degree[i]);
-    laplacian.setFromTriplets(entries.begin(), entries.end());
+  Eigen::SparseMatrix<double> laplacian(size, size);
+  std::vector<Eigen::Triplet<double>> entries;
+  std::vector<double> degree(n, 0);
+  for (const auto& [a, b] : topology.edges) {
+    entries.emplace_back(a, b, -1.0);
+    entries.emplace_back(b, a, -1.0);
+    degree[std::size_t(a)] += 1;
+    degree[std::size_t(b)] += 1;
   }
-  const MembraneStep membrane(laplacian, p);
-  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+  for (std::size_t i = 0; i < n; ++i) entries.emplace_back(Eigen::Index(i), Eigen::Index(i), degree[i]);
+  laplacian.setFromTriplets(entries.begin(), entries.end());
+  return laplacian;
+}
 
-  Eigen::MatrixXd initialPositions(size, 3);
-  for (std::size_t i = 0; i < n; ++i) initialPositions.row(Eigen::Index(i)) = x0[i].transpose();
+Eigen::MatrixXd rowsOf(const std::vector<Vec>& points)
+{
+  Eigen::MatrixXd rows(Eigen::Index(points.size()), 3);
+  for (std::size_t i = 0; i < points.size(); ++i) rows.row(Eigen::Index(i)) = points[i].transpose();
+  return rows;
+}
 
-  // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near
-  //    it (within a step); the same active surface, run on the preoperative labels, finds it. The
-  //    displacement imposed is then intraoperative boundary minus preoperative boundary, so what the
-  //    mesh approximates and what the method smooths cancels out, and no shift means no motion.
-  const auto targetStart = std::chrono::steady_clock::now();
-  const Eigen::MatrixXd smoothedStart = taubinSmoothed(initialPositions, laplacian, p.restSmoothingIterations);
-  Eigen::MatrixXd preopBoundary = smoothedStart;
-  std::vector<unsigned char> freeReason(n, 0); // 0 imposed, 1 resected tumour, 2 outside the image, 3 unmatched
-  FitOutcome preopFit;
-  preopFit.converged = true;
-  if (previousSurface) {
-    // An earlier scan of the same case found it already.
-    vtkDataArray* found = previousSurface->GetPointData()->GetArray("PreopBoundary");
-    vtkDataArray* previousIds = previousSurface->GetPointData()->GetArray("MeshNodeId");
-    if (!found || found->GetNumberOfComponents() != 3 || !previousIds) {
-      throw InputError(names.previousSurface + ": no point arrays \"PreopBoundary\" (3 components) and \"MeshNodeId\"");
-    }
-    if (previousSurface->GetNumberOfPoints() != vtkIdType(n)) {
-      throw InputError(names.previousSurface + ": " + std::to_string(previousSurface->GetNumberOfPoints()) +
-                       " surface nodes, not the " + std::to_string(n) + " of " + names.mesh + ": another mesh");
-    }
-    for (std::size_t i = 0; i < n; ++i) {
-      if (std::lround(previousIds->GetComponent(vtkIdType(i), 0)) != std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))) {
-        throw InputError(names.previousSurface + ": surface node " + std::to_string(i) + " is another mesh node than in " + names.mesh);
-      }
-      for (int d = 0; d < 3; ++d) {
-        const double value = found->GetComponent(vtkIdType(i), d);
-        if (!std::isfinite(value)) throw InputError(names.previousSurface + ": a PreopBoundary value is not finite");
-        preopBoundary(Eigen::Index(i), d) = value;
-      }
-    }
-    result.preopBoundarySeconds = secondsSince(targetStart);
-  } else if (preopLabels) {
-    Warnings ignored;
-    // Only the part around the surface is needed: distance maps are the stage's main cost.
-    std::vector<Vec> indices(n);
-    const PreopToIntraopIndex toFullIndex = physicalToIndexOf(ImageGeometry::of(preopLabels));
-    for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
-    const LabelImage::Pointer around = cropped(*preopLabels, regionAround(ImageGeometry::of(preopLabels), indices, PreopCropMarginMm));
-    const MaskImage::Pointer preopMask = targetBrainMask(*around, brain, names.preopLabels, ignored);
-    const ScalarImage::Pointer preopDistance = smoothed(boundaryDistanceMm(preopMask), p.distanceSmoothingMm);
-    const TrilinearVolume preopField(*preopDistance);
-    const PreopToIntraopIndex toPreopIndex = physicalToIndexOf(ImageGeometry::of(around.GetPointer()));
-    std::vector<unsigned char> none(n, 0);
-    preopFit = fitSurface(membrane, smoothedStart, preopField, toPreopIndex, nullptr, none, p);
-    preopBoundary = preopFit.positions;
-    result.preopBoundarySeconds = secondsSince(targetStart);
+/// The preoperative boundary an earlier scan of the same case found (its surface's "PreopBoundary"),
+/// checked to belong to the same mesh nodes; written into `boundary`.
+void readPreopBoundary(vtkPolyData* previousSurface, const BrainSurface& surface, const ActiveSurfaceInputNames& names,
+                       Eigen::MatrixXd& boundary)
+{
+  const std::size_t n = surface.size();
+  vtkDataArray* found = previousSurface->GetPointData()->GetArray("PreopBoundary");
+  vtkDataArray* previousIds = previousSurface->GetPointData()->GetArray("MeshNodeId");
+  if (!found || found->GetNumberOfComponents() != 3 || !previousIds) {
+    throw InputError(names.previousSurface + ": no point arrays \"PreopBoundary\" (3 components) and \"MeshNodeId\"");
   }
-
-  // -- The intraoperative target.
-  const auto intraopStart = std::chrono::steady_clock::now();
-  // Is the tumour resected? Its volume in the intraoperative labels against the mesh's.
-  if (meshVolumeMl.count(p.tumourLabel)) {
-    std::size_t tumourVoxels = 0;
-    const LabelPixel* l = intraopLabels.GetBufferPointer();
-    for (std::size_t i = 0, count = grid.numberOfVoxels(); i < count; ++i) tumourVoxels += l[i] == p.tumourLabel;
-    const double voxelMl = grid.spacing[0] * grid.spacing[1] * grid.spacing[2] / 1000.0;
-    result.tumourResected = double(tumourVoxels) * voxelMl < p.resectedFraction * meshVolumeMl[p.tumourLabel];
+  if (previousSurface->GetNumberOfPoints() != vtkIdType(n)) {
+    throw InputError(names.previousSurface + ": " + std::to_string(previousSurface->GetNumberOfPoints()) +
+                     " surface nodes, not the " + std::to_string(n) + " of " + names.mesh + ": another mesh");
   }
-  const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
-  std::vector<Vec> indices(n);
-  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(x0[i]);
-  // -- What the field of view covers (a slab covers part of the brain): the nodes outside it are
-  //    left to the elastic model, or held at rest.
   for (std::size_t i = 0; i < n; ++i) {
-    const vtkIdType node = vtkIdType(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0)));
+    if (std::lround(previousIds->GetComponent(vtkIdType(i), 0)) != surface.meshNode(i)) {
+      throw InputError(names.previousSurface + ": surface node " + std::to_string(i) + " is another mesh node than in " + names.mesh);
+    }
+    for (int d = 0; d < 3; ++d) {
+      const double value = found->GetComponent(vtkIdType(i), d);
+      if (!std::isfinite(value)) throw InputError(names.previousSurface + ": a PreopBoundary value is not finite");
+      boundary(Eigen::Index(i), d) = value;
+    }
+  }
+}
+
+/// The same active surface run on the preoperative labels, from `start`: where the preoperative
+/// brain boundary is at each node. Only the labels around the surface are used (distance maps are
+/// the stage's main cost).
+FitOutcome fitPreopBoundary(const LabelImage& preopLabels, const BrainSurface& surface, const std::set<int>& brain,
+                            const MembraneStep& membrane, const Eigen::MatrixXd& start, const ActiveSurfaceParameters& p,
+                            const std::string& preopLabelsName)
+{
+  const std::size_t n = surface.size();
+  Warnings ignored;
+  std::vector<Vec> indices(n);
+  const PreopToIntraopIndex toFullIndex = physicalToIndexOf(ImageGeometry::of(&preopLabels));
+  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(surface.points[i]);
+  const LabelImage::Pointer around = cropped(preopLabels, regionAround(ImageGeometry::of(&preopLabels), indices, PreopCropMarginMm));
+  const MaskImage::Pointer preopMask = targetBrainMask(*around, brain, preopLabelsName, ignored);
+  const ScalarImage::Pointer preopDistance = smoothed(boundaryDistanceMm(preopMask), p.distanceSmoothingMm);
+  const TrilinearVolume preopField(*preopDistance);
+  const PreopToIntraopIndex toPreopIndex = physicalToIndexOf(ImageGeometry::of(around.GetPointer()));
+  std::vector<unsigned char> none(n, 0);
+  return fitSurface(membrane, start, preopField, toPreopIndex, nullptr, none, p);
+}
+
+/// Whether the tumour is resected: its volume in the intraoperative labels against the mesh's.
+bool tumourIsResected(const LabelImage& intraopLabels, const ImageGeometry& grid, const MeshContents& contents,
+                      const ActiveSurfaceParameters& p)
+{
+  if (!contents.volumeMl.count(p.tumourLabel)) return false;
+  std::size_t tumourVoxels = 0;
+  const LabelPixel* l = intraopLabels.GetBufferPointer();
+  for (std::size_t i = 0, count = grid.numberOfVoxels(); i < count; ++i) tumourVoxels += l[i] == p.tumourLabel;
+  const double voxelMl = grid.spacing[0] * grid.spacing[1] * grid.spacing[2] / 1000.0;
+  return double(tumourVoxels) * voxelMl < p.resectedFraction * contents.volumeMl.at(p.tumourLabel);
+}
+
+/// Why each node is free before matching: the resected tumour's nodes, and the nodes outside what
+/// the field of view covers (a slab covers part of the brain), left to the elastic model or held at
+/// rest. Counts the covered nodes into `result`.
+std::vector<unsigned char> freeReasonsBeforeMatching(const BrainSurface& surface, const std::set<vtkIdType>& tumourNodes,
+                                                     const PreopToIntraopIndex& toFullIndex, const ImageGeometry& grid,
+                                                     const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  std::vector<unsigned char> freeReason(surface.size(), 0);
+  for (std::size_t i = 0; i < surface.size(); ++i) {
+    const vtkIdType node = vtkIdType(surface.meshNode(i));
     if (result.tumourResected && tumourNodes.count(node)) freeReason[i] = ResectedTumour;
-    if (!TrilinearVolume::insideGrid(toFullIndex(x0[i]), grid)) {
+    if (!TrilinearVolume::insideGrid(toFullIndex(surface.points[i]), grid)) {
       freeReason[i] = p.holdOutsideFieldOfView ? HeldOutsideImage : OutsideImage;
     } else {
       ++result.coveredSurfaceNodes;
     }
   }
-  result.surfaceNodes = n;
-  result.coveredBrainMl = coveredBrainVolumeMl(mesh, cellLabels, meshedBrain, toFullIndex, grid, result.meshedBrainMl);
-  requireEnoughCoverage(result, p, names.labels);
-  const itk::ImageRegion<3> region = regionAround(grid, indices, CropMarginMm);
-  const LabelImage::Pointer labelsAround = cropped(intraopLabels, region);
-  const MaskImage::Pointer mask = targetBrainMask(*labelsAround, brain, names.labels, result.warnings);
-  const ScalarImage::Pointer distance = smoothed(boundaryDistanceMm(mask), p.distanceSmoothingMm);
-  const TrilinearVolume distanceField(*distance);
-  const ImageGeometry cropGrid = ImageGeometry::of(labelsAround.GetPointer());
-  const PreopToIntraopIndex toIndex = preopToIntraopIndex(rigidIntraopToPreop, cropGrid);
+  return freeReason;
+}
 
+/// The intraoperative target around the surface: the brain's (smoothed) signed distance map on a
+/// crop of the labels, and the map from the model frame to the crop's indices.
+struct IntraopTarget {
+  itk::ImageRegion<3> region;
+  LabelImage::Pointer labels;
+  ScalarImage::Pointer distance;
+  std::unique_ptr<TrilinearVolume> field; ///< samples `distance`
+  ImageGeometry grid;
+  PreopToIntraopIndex toIndex;
+};
 
-  // Expected grey levels just inside and just outside the brain, from the segmentation's boundary band.
-  std::unique_ptr<ImageEdgeTerm> edges;
-  if (intraopImage && (p.imageWeight > 0 || p.imageRescue)) {
-    edges = std::make_unique<ImageEdgeTerm>();
-    const ScalarImage::Pointer imageAround = cropped(*intraopImage, region);
-    const float* d = distance->GetBufferPointer();
-    const float* v = imageAround->GetBufferPointer();
-    const LabelPixel* l = labelsAround->GetBufferPointer();
-    std::vector<double> inside, outsideBand, fluid, parenchyma;
-    for (std::size_t i = 0, count = cropGrid.numberOfVoxels(); i < count; ++i) {
-      if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
-      else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
-      if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
-      else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
-    }
-    result.expectedInsideIntensity = median(inside);
-    result.expectedOutsideIntensity = median(outsideBand);
-    // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
-    // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
-    // for the image term to catch, not a second side.
-    result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
-    edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
-                                result.outsideBrighterShare);
-    result.outsideSides = edges->sides.size();
-    edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
-    edges->keepAlive = imageAround;
+IntraopTarget intraopTargetAround(const LabelImage& intraopLabels, const std::vector<Vec>& indices, const std::set<int>& brain,
+                                  const SpatialTransform& rigidIntraopToPreop, const ActiveSurfaceParameters& p,
+                                  const std::string& labelsName, Warnings& warnings)
+{
+  IntraopTarget target;
+  target.region = regionAround(ImageGeometry::of(&intraopLabels), indices, CropMarginMm);
+  target.labels = cropped(intraopLabels, target.region);
+  const MaskImage::Pointer mask = targetBrainMask(*target.labels, brain, labelsName, warnings);
+  target.distance = smoothed(boundaryDistanceMm(mask), p.distanceSmoothingMm);
+  target.field = std::make_unique<TrilinearVolume>(*target.distance);
+  target.grid = ImageGeometry::of(target.labels.GetPointer());
+  target.toIndex = preopToIntraopIndex(rigidIntraopToPreop, target.grid);
+  return target;
+}
+
+/// The image term's expected grey levels just inside and just outside the brain, from the
+/// segmentation's boundary band; the figures go into `result`.
+std::unique_ptr<ImageEdgeTerm> imageEdgeTermOf(const ScalarImage& intraopImage, const IntraopTarget& target,
+                                               const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  auto edges = std::make_unique<ImageEdgeTerm>();
+  const ScalarImage::Pointer imageAround = cropped(intraopImage, target.region);
+  const float* d = target.distance->GetBufferPointer();
+  const float* v = imageAround->GetBufferPointer();
+  const LabelPixel* l = target.labels->GetBufferPointer();
+  std::vector<double> inside, outsideBand, fluid, parenchyma;
+  for (std::size_t i = 0, count = target.grid.numberOfVoxels(); i < count; ++i) {
+    if (d[i] >= -3.0f && d[i] <= -1.0f) inside.push_back(v[i]);
+    else if (d[i] >= 1.0f && d[i] <= 3.0f) outsideBand.push_back(v[i]);
+    if (l[i] == p.fluidLabel) fluid.push_back(v[i]);
+    else if (l[i] == p.parenchymaLabel) parenchyma.push_back(v[i]);
   }
-  result.targetSeconds = secondsSince(intraopStart);
+  result.expectedInsideIntensity = median(inside);
+  result.expectedOutsideIntensity = median(outsideBand);
+  // Two-sided surroundings only where this scan's fluid is brighter than its parenchyma (T2):
+  // in T1 a band outside that holds brain (a segmentation eroded or moved into it) is an error
+  // for the image term to catch, not a second side.
+  result.fluidBrighterThanParenchyma = !fluid.empty() && !parenchyma.empty() && median(fluid) > median(parenchyma);
+  edges->sides = outsideSides(inside, outsideBand, result.fluidBrighterThanParenchyma ? p.twoSidedMinimumShare : 0.5 + 1e-9,
+                              result.outsideBrighterShare);
+  result.outsideSides = edges->sides.size();
+  edges->intensity = std::make_unique<TrilinearVolume>(*imageAround);
+  edges->keepAlive = imageAround;
+  return edges;
+}
 
-  // -- The active surface, from the preoperative boundary onto the intraoperative one.
-  const auto iterationStart = std::chrono::steady_clock::now();
-  const std::vector<double> initialResiduals = residualsAt(initialPositions, distanceField, toIndex);
-  FitOutcome fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p);
-  result.iterations = fit.iterations;
+/// The active surface's fit onto the intraoperative boundary, and (when asked) the matches along
+/// the sinking direction.
+struct IntraopFit {
+  FitOutcome fit;
   SinkingDirectionMatch along;
+};
+
+IntraopFit fitIntraopBoundary(const MembraneStep& membrane, const Eigen::MatrixXd& preopBoundary, const IntraopTarget& target,
+                              const ImageEdgeTerm* edges, const std::vector<unsigned char>& freeReason,
+                              const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  IntraopFit out;
+  out.fit = fitSurface(membrane, preopBoundary, *target.field, target.toIndex, edges, freeReason, p);
+  result.iterations = out.fit.iterations;
   if (p.matchAlongSinkingDirection) {
-    along = matchAlongSinkingDirection(preopBoundary, fit, distanceField, toIndex, freeReason, p);
-    result.sinkingDirection = {along.direction[0], along.direction[1], along.direction[2]};
-    result.directionalNodes = along.matched;
-    if (along.matched > 0) {
-      const Eigen::MatrixXd start = fit.positions - preopBoundary;
-      fit = fitSurface(membrane, preopBoundary, distanceField, toIndex, edges.get(), freeReason, p, &start, &along.targets);
-      result.iterations += fit.iterations;
+    out.along = matchAlongSinkingDirection(preopBoundary, out.fit, *target.field, target.toIndex, freeReason, p);
+    result.sinkingDirection = {out.along.direction[0], out.along.direction[1], out.along.direction[2]};
+    result.directionalNodes = out.along.matched;
+    if (out.along.matched > 0) {
+      const Eigen::MatrixXd start = out.fit.positions - preopBoundary;
+      out.fit = fitSurface(membrane, preopBoundary, *target.field, target.toIndex, edges, freeReason, p, &start, &out.along.targets);
+      result.iterations += out.fit.iterations;
     }
   }
-  result.converged = fit.converged;
+  result.converged = out.fit.converged;
+  return out;
+}
+
+void warnIfNotConverged(const FitOutcome& preopFit, bool preopFitted, const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
   if (!result.converged) {
     result.warnings.push_back("surface: the active surface did not converge in " + std::to_string(p.maximumIterations) +
                               " iterations");
   }
-  if (preopLabels && !preopFit.converged) {
+  if (preopFitted && !preopFit.converged) {
     result.warnings.push_back("surface: the fit to the preoperative boundary did not converge in " +
                               std::to_string(p.maximumIterations) + " iterations");
   }
-  result.iterationSeconds = secondsSince(iterationStart);
+}
 
-  // -- Nodes left free, and the figures.
+/// Leaves free the nodes that stayed far from the boundary, counts each reason and the residual
+/// figures; refuses a fit where fewer than half the covered nodes found the boundary.
+void summariseMatch(const FitOutcome& fit, const std::vector<double>& initialResiduals, std::vector<unsigned char>& freeReason,
+                    const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
   std::vector<double> residuals, before;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
     if (freeReason[i] == 0 && fit.residuals[i] > p.unmatchedResidualMm) freeReason[i] = 3;
     switch (freeReason[i]) {
     case 0:
@@ -1063,21 +1210,17 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   result.initialMeanResidualMm = mean(before);
   result.p95ResidualMm = percentile(residuals, 0.95);
   result.maxResidualMm = *std::max_element(residuals.begin(), residuals.end());
+}
 
-  if (p.snapToBoundary) {
-    result.unsnappedNodes = snapOntoBoundary(fit, along.targets, preopBoundary, topology.triangles, freeReason, p);
-  }
-  Eigen::MatrixXd u = fit.positions - preopBoundary;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (freeReason[i] == HeldOutsideImage) {
-      u.row(Eigen::Index(i)).setZero();
-      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
-    }
-  }
+/// Refuses (MethodError) a surface that folded: more than 1 % of its triangles reversed; warns of fewer.
+void requireUnfolded(const Eigen::MatrixXd& preopBoundary, const Eigen::MatrixXd& positions, const SurfaceTopology& topology,
+                     ActiveSurfaceResult& result)
+{
+  const std::size_t n = std::size_t(preopBoundary.rows());
   std::vector<Vec> from(n), to(n);
   for (std::size_t i = 0; i < n; ++i) {
     from[i] = preopBoundary.row(Eigen::Index(i)).transpose();
-    to[i] = fit.positions.row(Eigen::Index(i)).transpose();
+    to[i] = positions.row(Eigen::Index(i)).transpose();
   }
   for (const auto& t : topology.triangles) result.flippedTriangles += triangleNormal(from, t).dot(triangleNormal(to, t)) <= 0;
   if (result.flippedTriangles > topology.triangles.size() / 100) {
@@ -1087,8 +1230,34 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   if (result.flippedTriangles > 0) {
     result.warnings.push_back("surface: " + std::to_string(result.flippedTriangles) + " surface triangles reversed their orientation");
   }
+}
 
-  // -- The deformed surface: each mesh node moved by its displacement, with the arrays.
+/// Each node's displacement from its preoperative boundary point: snapped onto the target boundary
+/// where asked, zero where held outside the image; the surface must not have folded.
+Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
+                                     const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                                     ActiveSurfaceResult& result)
+{
+  FitOutcome& fit = fitted.fit;
+  if (p.snapToBoundary) {
+    result.unsnappedNodes = snapOntoBoundary(fit, fitted.along.targets, preopBoundary, topology.triangles, freeReason, p);
+  }
+  Eigen::MatrixXd u = fit.positions - preopBoundary;
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
+    if (freeReason[i] == HeldOutsideImage) {
+      u.row(Eigen::Index(i)).setZero();
+      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
+    }
+  }
+  requireUnfolded(preopBoundary, fit.positions, topology, result);
+  return u;
+}
+
+/// The deformed surface: each mesh node moved by its displacement, with the arrays the contract
+/// names, and "PreopBoundary" for the next scan (deformBrainSurface's previousSurface).
+vtkSmartPointer<vtkPolyData> deformedSurface(const BrainSurface& initial, const Eigen::MatrixXd& u, const Eigen::MatrixXd& preopBoundary,
+                                             const std::vector<unsigned char>& freeReason, ActiveSurfaceResult& result)
+{
   auto surface = vtkSmartPointer<vtkPolyData>::New();
   vtkNew<vtkPoints> points;
   points->SetDataTypeToDouble();
@@ -1100,34 +1269,119 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   nodeIds->SetName("MeshNodeId");
   imposed->SetName("Imposed");
   std::vector<double> magnitudes;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < initial.size(); ++i) {
     const Vec d = u.row(Eigen::Index(i)).transpose();
-    const Vec moved = x0[i] + d;
+    const Vec moved = initial.points[i] + d;
     points->InsertNextPoint(moved.data());
     displacement->InsertNextTuple(d.data());
     magnitude->InsertNextValue(d.norm());
     magnitudes.push_back(d.norm());
-    nodeIds->InsertNextValue(int(std::lround(meshNodeIds->GetComponent(vtkIdType(i), 0))));
+    nodeIds->InsertNextValue(int(initial.meshNode(i)));
     imposed->InsertNextValue(freeReason[i] == Matched || freeReason[i] == HeldOutsideImage ? 1 : 0);
   }
   result.meanDisplacementMm = mean(magnitudes);
   result.maxDisplacementMm = *std::max_element(magnitudes.begin(), magnitudes.end());
   surface->SetPoints(points);
-  surface->SetPolys(initial->GetPolys());
+  surface->SetPolys(initial.polyData->GetPolys());
   surface->GetPointData()->AddArray(displacement);
   surface->GetPointData()->AddArray(magnitude);
   surface->GetPointData()->AddArray(nodeIds);
   surface->GetPointData()->AddArray(imposed);
-  vtkNew<vtkDoubleArray> preopBoundaryArray; // for the next scan (deformBrainSurface's previousSurface)
+  vtkNew<vtkDoubleArray> preopBoundaryArray;
   preopBoundaryArray->SetName("PreopBoundary");
   preopBoundaryArray->SetNumberOfComponents(3);
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < initial.size(); ++i) {
     const Vec b = preopBoundary.row(Eigen::Index(i)).transpose();
     preopBoundaryArray->InsertNextTuple(b.data());
   }
   surface->GetPointData()->AddArray(preopBoundaryArray);
   surface->GetPointData()->SetActiveScalars("DisplacementMagnitude");
-  result.surface = surface;
+  return surface;
+}
+
+/// Refuses inputs that do not fit together: a non-linear rigid transform, labels off the image's
+/// grid, a mesh without cell labels (returned).
+vtkDataArray* checkedCellLabels(vtkUnstructuredGrid* mesh, const LabelImage& intraopLabels, const ScalarImage* intraopImage,
+                                const SpatialTransform& rigidIntraopToPreop, const ActiveSurfaceInputNames& names)
+{
+  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError(names.rigid + ": the rigid transform is not linear");
+  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
+  if (intraopImage && !grid.sameGridAs(ImageGeometry::of(intraopImage))) {
+    throw InputError(names.labels + ": not on the intraoperative image's grid (" + grid.describe() + " against " +
+                     ImageGeometry::of(intraopImage).describe() + ")");
+  }
+  vtkDataArray* cellLabels = mesh->GetCellData()->GetArray("Label");
+  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+  return cellLabels;
+}
+} // namespace
+
+ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
+                                       const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
+                                       const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
+                                       vtkPolyData* previousSurface)
+{
+  p.validate();
+  ActiveSurfaceResult result;
+  vtkDataArray* cellLabels = checkedCellLabels(mesh, intraopLabels, intraopImage, rigidIntraopToPreop, names);
+  const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
+
+  // -- The preoperative brain surface, and what is known of its nodes.
+  const std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
+  const MeshContents contents = meshContentsOf(mesh, cellLabels, brain, p, names.mesh);
+  const BrainSurface surface = brainSurfaceOf(mesh, contents.meshedBrain, names.mesh);
+  const std::size_t n = surface.size();
+
+  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
+  const Eigen::SparseMatrix<double> laplacian = graphLaplacian(surface.topology, n);
+  const MembraneStep membrane(laplacian, p);
+  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+  const Eigen::MatrixXd initialPositions = rowsOf(surface.points);
+
+  // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near
+  //    it (within a step); the same active surface, run on the preoperative labels, finds it. The
+  //    displacement imposed is then intraoperative boundary minus preoperative boundary, so what the
+  //    mesh approximates and what the method smooths cancels out, and no shift means no motion.
+  const auto targetStart = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd smoothedStart = taubinSmoothed(initialPositions, laplacian, p.restSmoothingIterations);
+  Eigen::MatrixXd preopBoundary = smoothedStart;
+  FitOutcome preopFit;
+  preopFit.converged = true;
+  if (previousSurface) {
+    readPreopBoundary(previousSurface, surface, names, preopBoundary); // an earlier scan of the same case found it
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  } else if (preopLabels) {
+    preopFit = fitPreopBoundary(*preopLabels, surface, brain, membrane, smoothedStart, p, names.preopLabels);
+    preopBoundary = preopFit.positions;
+    result.preopBoundarySeconds = secondsSince(targetStart);
+  }
+
+  // -- The intraoperative target, and which nodes it covers.
+  const auto intraopStart = std::chrono::steady_clock::now();
+  result.tumourResected = tumourIsResected(intraopLabels, grid, contents, p);
+  const PreopToIntraopIndex toFullIndex = preopToIntraopIndex(rigidIntraopToPreop, grid);
+  std::vector<Vec> indices(n);
+  for (std::size_t i = 0; i < n; ++i) indices[i] = toFullIndex(surface.points[i]);
+  std::vector<unsigned char> freeReason = freeReasonsBeforeMatching(surface, contents.tumourNodes, toFullIndex, grid, p, result);
+  result.surfaceNodes = n;
+  result.coveredBrainMl = coveredBrainVolumeMl(mesh, cellLabels, contents.meshedBrain, toFullIndex, grid, result.meshedBrainMl);
+  requireEnoughCoverage(result, p, names.labels);
+  const IntraopTarget target = intraopTargetAround(intraopLabels, indices, brain, rigidIntraopToPreop, p, names.labels, result.warnings);
+  std::unique_ptr<ImageEdgeTerm> edges;
+  if (intraopImage && (p.imageWeight > 0 || p.imageRescue)) edges = imageEdgeTermOf(*intraopImage, target, p, result);
+  result.targetSeconds = secondsSince(intraopStart);
+
+  // -- The active surface, from the preoperative boundary onto the intraoperative one.
+  const auto iterationStart = std::chrono::steady_clock::now();
+  const std::vector<double> initialResiduals = residualsAt(initialPositions, *target.field, target.toIndex);
+  IntraopFit fitted = fitIntraopBoundary(membrane, preopBoundary, target, edges.get(), freeReason, p, result);
+  warnIfNotConverged(preopFit, preopLabels != nullptr, p, result);
+  result.iterationSeconds = secondsSince(iterationStart);
+
+  // -- Nodes left free, the figures, and the deformed surface.
+  summariseMatch(fitted.fit, initialResiduals, freeReason, p, result);
+  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
+  result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;
 }
 

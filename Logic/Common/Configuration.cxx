@@ -8,8 +8,11 @@
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
+#include <initializer_list>
 #include <set>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 namespace brainshift {
 namespace fs = std::filesystem;
@@ -36,6 +39,193 @@ double number(const json& value, const std::string& where)
   if (!value.is_number()) throw InputError(where + ": a number is expected, not " + value.dump());
   return value.get<double>();
 }
+/// The label number a "materials" key names, or -1.
+int labelOfKey(const std::string& key)
+{
+  int label = -1;
+  try {
+    std::size_t used = 0;
+    label = std::stoi(key, &used);
+    if (used != key.size()) label = -1;
+  } catch (const std::exception&) {
+  }
+  return label;
+}
+
+void readMaterials(const json& materials, const std::string& file, Configuration& configuration)
+{
+  if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
+  for (auto it = materials.begin(); it != materials.end(); ++it) {
+    const std::string where = file + ": materials." + it.key();
+    const int label = labelOfKey(it.key());
+    if (label < 0 || label > 65535) throw InputError(where + ": the key must be a label number");
+    if (!it.value().is_object()) throw InputError(where + ": an object with youngs_modulus_pa and poisson_ratio is expected");
+    requireKnownKeys(it.value(), {"youngs_modulus_pa", "poisson_ratio"}, where);
+    Material material = configuration.materials.count(label) ? configuration.materials[label] : Material{};
+    if (it.value().contains("youngs_modulus_pa")) material.youngsModulusPa = number(it.value()["youngs_modulus_pa"], where + ".youngs_modulus_pa");
+    if (it.value().contains("poisson_ratio")) material.poissonRatio = number(it.value()["poisson_ratio"], where + ".poisson_ratio");
+    configuration.materials[label] = material;
+  }
+}
+
+void readRegionOfInterest(const json& roi, const std::string& file, Configuration& configuration)
+{
+  const std::string where = file + ": mesh.region_of_interest";
+  if (!roi.is_object()) throw InputError(where + " must be an object {\"center_lps\": [x, y, z], \"radius_mm\": r}");
+  requireKnownKeys(roi, {"center_lps", "radius_mm"}, where);
+  if (!roi.contains("center_lps") || !roi["center_lps"].is_array() || roi["center_lps"].size() != 3) {
+    throw InputError(where + ".center_lps must be a list of three numbers (LPS mm)");
+  }
+  for (int d = 0; d < 3; ++d) {
+    configuration.meshRegionOfInterestCenterLps[std::size_t(d)] = number(roi["center_lps"][std::size_t(d)], where + ".center_lps");
+  }
+  if (!roi.contains("radius_mm")) throw InputError(where + ".radius_mm is missing");
+  configuration.meshRegionOfInterestRadiusMm = number(roi["radius_mm"], where + ".radius_mm");
+}
+
+void readMesh(const json& mesh, const std::string& file, Configuration& configuration)
+{
+  if (!mesh.is_object()) throw InputError(file + ": \"mesh\" must be an object");
+  requireKnownKeys(mesh, {"resolution_mm", "labels", "backend", "grading", "coarsening_levels", "region_of_interest"}, file + ": mesh");
+  if (mesh.contains("grading")) configuration.meshGrading = number(mesh["grading"], file + ": mesh.grading");
+  if (mesh.contains("coarsening_levels")) {
+    if (!mesh["coarsening_levels"].is_number_integer()) throw InputError(file + ": mesh.coarsening_levels must be a whole number");
+    configuration.meshCoarseningLevels = mesh["coarsening_levels"].get<int>();
+  }
+  if (mesh.contains("region_of_interest")) readRegionOfInterest(mesh["region_of_interest"], file, configuration);
+  if (mesh.contains("backend")) {
+    if (!mesh["backend"].is_string()) throw InputError(file + ": mesh.backend must be \"lattice\" or \"cgal\"");
+    configuration.meshBackend = mesh["backend"].get<std::string>();
+  }
+  if (mesh.contains("resolution_mm")) configuration.meshResolutionMm = number(mesh["resolution_mm"], file + ": mesh.resolution_mm");
+  if (mesh.contains("labels")) {
+    if (!mesh["labels"].is_array()) throw InputError(file + ": mesh.labels must be a list of labels");
+    configuration.meshLabels.clear();
+    for (const json& l : mesh["labels"]) {
+      if (!l.is_number_integer()) throw InputError(file + ": mesh.labels holds " + l.dump() + ", not a label");
+      configuration.meshLabels.push_back(l.get<int>());
+    }
+  }
+}
+
+void readSolver(const json& solver, const std::string& file, Configuration& configuration)
+{
+  if (!solver.is_object()) throw InputError(file + ": \"solver\" must be an object");
+  requireKnownKeys(solver, {"options"}, file + ": solver");
+  if (solver.contains("options")) {
+    if (!solver["options"].is_string()) throw InputError(file + ": solver.options must be a string of PETSc options");
+    configuration.solverOptions = solver["options"].get<std::string>();
+  }
+}
+
+/// Each key of `flags` that `section` (named `where`) holds must be true or false; read into its target.
+void readFlags(const json& section, std::initializer_list<std::pair<const char*, bool*>> flags, const std::string& where)
+{
+  for (const auto& [key, target] : flags) {
+    if (!section.contains(key)) continue;
+    if (!section[key].is_boolean()) throw InputError(where + "." + key + " must be true or false");
+    *target = section[key].get<bool>();
+  }
+}
+
+void readClassification(const json& c, const std::string& file, Configuration& configuration)
+{
+  if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
+  requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
+                      "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look"},
+                   file + ": classification");
+  if (c.contains("tumour_resected")) {
+    if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
+    configuration.classificationTumourResected = c["tumour_resected"].get<std::string>();
+  }
+  if (c.contains("refinement_passes")) {
+    const json& passes = c["refinement_passes"];
+    if (passes.is_string() && passes.get<std::string>() == "auto") {
+      configuration.classificationRefinementPasses.reset();
+    } else if (passes.is_number_integer() && passes.get<int>() >= 0) {
+      configuration.classificationRefinementPasses = passes.get<unsigned>();
+    } else {
+      throw InputError(file + ": classification.refinement_passes must be \"auto\" or a whole number >= 0");
+    }
+  }
+  if (c.contains("refinement_reach_mm")) {
+    configuration.classificationRefinementReachMm = number(c["refinement_reach_mm"], file + ": classification.refinement_reach_mm");
+  }
+  if (c.contains("refinement_tolerance_mm")) {
+    configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
+  }
+  if (c.contains("k")) {
+    if (!c["k"].is_number_integer() || c["k"].get<int>() < 1) throw InputError(file + ": classification.k must be a whole number >= 1");
+    configuration.classificationK = c["k"].get<unsigned>();
+  }
+  if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
+  readFlags(c, {{"bias_correction", &configuration.classificationBiasCorrection},
+                {"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
+                {"tumour_fluid_by_look", &configuration.classificationTumourFluidByLook}},
+            file + ": classification");
+}
+
+void readRigid(const json& c, const std::string& file, Configuration& configuration)
+{
+  if (!c.is_object()) throw InputError(file + ": \"rigid\" must be an object");
+  requireKnownKeys(c, {"sampling", "levels"}, file + ": rigid");
+  if (c.contains("sampling")) configuration.rigidSamplingFraction = number(c["sampling"], file + ": rigid.sampling");
+  if (c.contains("levels")) {
+    if (!c["levels"].is_number_integer() || c["levels"].get<long>() < 1) {
+      throw InputError(file + ": rigid.levels must be a whole number >= 1");
+    }
+    configuration.rigidLevels = c["levels"].get<unsigned>();
+  }
+}
+
+void readSurface(const json& c, const std::string& file, Configuration& configuration)
+{
+  if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
+  requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
+                       "snap_to_boundary", "hold_outside_field_of_view"}, file + ": surface");
+  readFlags(c, {{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
+                {"snap_to_boundary", &configuration.surfaceSnapToBoundary},
+                {"hold_outside_field_of_view", &configuration.surfaceHoldOutsideFieldOfView}},
+            file + ": surface");
+  if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");
+  if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
+  if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");
+  if (c.contains("max_iterations")) {
+    if (!c["max_iterations"].is_number_integer() || c["max_iterations"].get<long>() < 1) {
+      throw InputError(file + ": surface.max_iterations must be a whole number >= 1");
+    }
+    configuration.surfaceMaximumIterations = c["max_iterations"].get<unsigned>();
+  }
+}
+
+void readBlockMatching(const json& c, const std::string& file, Configuration& configuration)
+{
+  if (!c.is_object()) throw InputError(file + ": \"block_matching\" must be an object");
+  Configuration::BlockMatching& b = configuration.blockMatching;
+  const std::vector<std::pair<const char*, double*>> numbers{
+    {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
+    {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
+    {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
+    {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
+  std::set<std::string> keys{"enabled"};
+  for (const auto& [key, target] : numbers) keys.insert(key);
+  requireKnownKeys(c, keys, file + ": block_matching");
+  readFlags(c, {{"enabled", &b.enabled}}, file + ": block_matching");
+  for (const auto& [key, target] : numbers) {
+    if (c.contains(key)) *target = number(c[key], file + ": block_matching." + key);
+  }
+}
+
+/// Each section of the configuration file: its reader (the sections are read in this order).
+using SectionReader = void (*)(const json&, const std::string&, Configuration&);
+const std::vector<std::pair<const char*, SectionReader>>& sectionReaders()
+{
+  static const std::vector<std::pair<const char*, SectionReader>> readers{
+    {"materials", readMaterials}, {"mesh", readMesh},       {"solver", readSolver},
+    {"classification", readClassification}, {"rigid", readRigid}, {"surface", readSurface},
+    {"block_matching", readBlockMatching}};
+  return readers;
+}
 } // namespace
 
 Configuration Configuration::load(const fs::path& path)
@@ -50,169 +240,8 @@ Configuration Configuration::load(const fs::path& path)
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
   requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface", "block_matching"}, file);
-  if (document.contains("materials")) {
-    const json& materials = document["materials"];
-    if (!materials.is_object()) throw InputError(file + ": \"materials\" must be an object keyed by label");
-    for (auto it = materials.begin(); it != materials.end(); ++it) {
-      const std::string where = file + ": materials." + it.key();
-      int label = -1;
-      try {
-        std::size_t used = 0;
-        label = std::stoi(it.key(), &used);
-        if (used != it.key().size()) label = -1;
-      } catch (const std::exception&) {
-      }
-      if (label < 0 || label > 65535) throw InputError(where + ": the key must be a label number");
-      if (!it.value().is_object()) throw InputError(where + ": an object with youngs_modulus_pa and poisson_ratio is expected");
-      requireKnownKeys(it.value(), {"youngs_modulus_pa", "poisson_ratio"}, where);
-      Material material = configuration.materials.count(label) ? configuration.materials[label] : Material{};
-      if (it.value().contains("youngs_modulus_pa")) material.youngsModulusPa = number(it.value()["youngs_modulus_pa"], where + ".youngs_modulus_pa");
-      if (it.value().contains("poisson_ratio")) material.poissonRatio = number(it.value()["poisson_ratio"], where + ".poisson_ratio");
-      configuration.materials[label] = material;
-    }
-  }
-  if (document.contains("mesh")) {
-    const json& mesh = document["mesh"];
-    if (!mesh.is_object()) throw InputError(file + ": \"mesh\" must be an object");
-    requireKnownKeys(mesh, {"resolution_mm", "labels", "backend", "grading", "coarsening_levels", "region_of_interest"}, file + ": mesh");
-    if (mesh.contains("grading")) configuration.meshGrading = number(mesh["grading"], file + ": mesh.grading");
-    if (mesh.contains("coarsening_levels")) {
-      if (!mesh["coarsening_levels"].is_number_integer()) throw InputError(file + ": mesh.coarsening_levels must be a whole number");
-      configuration.meshCoarseningLevels = mesh["coarsening_levels"].get<int>();
-    }
-    if (mesh.contains("region_of_interest")) {
-      const json& roi = mesh["region_of_interest"];
-      const std::string where = file + ": mesh.region_of_interest";
-      if (!roi.is_object()) throw InputError(where + " must be an object {\"center_lps\": [x, y, z], \"radius_mm\": r}");
-      requireKnownKeys(roi, {"center_lps", "radius_mm"}, where);
-      if (!roi.contains("center_lps") || !roi["center_lps"].is_array() || roi["center_lps"].size() != 3) {
-        throw InputError(where + ".center_lps must be a list of three numbers (LPS mm)");
-      }
-      for (int d = 0; d < 3; ++d) {
-        configuration.meshRegionOfInterestCenterLps[std::size_t(d)] = number(roi["center_lps"][std::size_t(d)], where + ".center_lps");
-      }
-      if (!roi.contains("radius_mm")) throw InputError(where + ".radius_mm is missing");
-      configuration.meshRegionOfInterestRadiusMm = number(roi["radius_mm"], where + ".radius_mm");
-    }
-    if (mesh.contains("backend")) {
-      if (!mesh["backend"].is_string()) throw InputError(file + ": mesh.backend must be \"lattice\" or \"cgal\"");
-      configuration.meshBackend = mesh["backend"].get<std::string>();
-    }
-    if (mesh.contains("resolution_mm")) configuration.meshResolutionMm = number(mesh["resolution_mm"], file + ": mesh.resolution_mm");
-    if (mesh.contains("labels")) {
-      if (!mesh["labels"].is_array()) throw InputError(file + ": mesh.labels must be a list of labels");
-      configuration.meshLabels.clear();
-      for (const json& l : mesh["labels"]) {
-        if (!l.is_number_integer()) throw InputError(file + ": mesh.labels holds " + l.dump() + ", not a label");
-        configuration.meshLabels.push_back(l.get<int>());
-      }
-    }
-  }
-  if (document.contains("solver")) {
-    const json& solver = document["solver"];
-    if (!solver.is_object()) throw InputError(file + ": \"solver\" must be an object");
-    requireKnownKeys(solver, {"options"}, file + ": solver");
-    if (solver.contains("options")) {
-      if (!solver["options"].is_string()) throw InputError(file + ": solver.options must be a string of PETSc options");
-      configuration.solverOptions = solver["options"].get<std::string>();
-    }
-  }
-  if (document.contains("classification")) {
-    const json& c = document["classification"];
-    if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
-    requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
-                        "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look"},
-                     file + ": classification");
-    if (c.contains("tumour_resected")) {
-      if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
-      configuration.classificationTumourResected = c["tumour_resected"].get<std::string>();
-    }
-    if (c.contains("refinement_passes")) {
-      const json& passes = c["refinement_passes"];
-      if (passes.is_string() && passes.get<std::string>() == "auto") {
-        configuration.classificationRefinementPasses.reset();
-      } else if (passes.is_number_integer() && passes.get<int>() >= 0) {
-        configuration.classificationRefinementPasses = passes.get<unsigned>();
-      } else {
-        throw InputError(file + ": classification.refinement_passes must be \"auto\" or a whole number >= 0");
-      }
-    }
-    if (c.contains("refinement_reach_mm")) {
-      configuration.classificationRefinementReachMm = number(c["refinement_reach_mm"], file + ": classification.refinement_reach_mm");
-    }
-    if (c.contains("refinement_tolerance_mm")) {
-      configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
-    }
-    if (c.contains("k")) {
-      if (!c["k"].is_number_integer() || c["k"].get<int>() < 1) throw InputError(file + ": classification.k must be a whole number >= 1");
-      configuration.classificationK = c["k"].get<unsigned>();
-    }
-    if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
-    if (c.contains("bias_correction")) {
-      if (!c["bias_correction"].is_boolean()) throw InputError(file + ": classification.bias_correction must be true or false");
-      configuration.classificationBiasCorrection = c["bias_correction"].get<bool>();
-    }
-    for (const auto& [key, target] :
-         {std::pair<const char*, bool*>{"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
-          {"tumour_fluid_by_look", &configuration.classificationTumourFluidByLook}}) {
-      if (!c.contains(key)) continue;
-      if (!c[key].is_boolean()) throw InputError(file + ": classification." + key + " must be true or false");
-      *target = c[key].get<bool>();
-    }
-  }
-  if (document.contains("rigid")) {
-    const json& c = document["rigid"];
-    if (!c.is_object()) throw InputError(file + ": \"rigid\" must be an object");
-    requireKnownKeys(c, {"sampling", "levels"}, file + ": rigid");
-    if (c.contains("sampling")) configuration.rigidSamplingFraction = number(c["sampling"], file + ": rigid.sampling");
-    if (c.contains("levels")) {
-      if (!c["levels"].is_number_integer() || c["levels"].get<long>() < 1) {
-        throw InputError(file + ": rigid.levels must be a whole number >= 1");
-      }
-      configuration.rigidLevels = c["levels"].get<unsigned>();
-    }
-  }
-  if (document.contains("surface")) {
-    const json& c = document["surface"];
-    if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
-    requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
-                         "snap_to_boundary", "hold_outside_field_of_view"}, file + ": surface");
-    for (const auto& [key, target] : {std::pair<const char*, bool*>{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
-                                      {"snap_to_boundary", &configuration.surfaceSnapToBoundary},
-                                      {"hold_outside_field_of_view", &configuration.surfaceHoldOutsideFieldOfView}}) {
-      if (!c.contains(key)) continue;
-      if (!c[key].is_boolean()) throw InputError(file + ": surface." + key + " must be true or false");
-      *target = c[key].get<bool>();
-    }
-    if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");
-    if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
-    if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");
-    if (c.contains("max_iterations")) {
-      if (!c["max_iterations"].is_number_integer() || c["max_iterations"].get<long>() < 1) {
-        throw InputError(file + ": surface.max_iterations must be a whole number >= 1");
-      }
-      configuration.surfaceMaximumIterations = c["max_iterations"].get<unsigned>();
-    }
-  }
-  if (document.contains("block_matching")) {
-    const json& c = document["block_matching"];
-    if (!c.is_object()) throw InputError(file + ": \"block_matching\" must be an object");
-    Configuration::BlockMatching& b = configuration.blockMatching;
-    const std::vector<std::pair<const char*, double*>> numbers{
-      {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
-      {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
-      {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
-      {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
-    std::set<std::string> keys{"enabled"};
-    for (const auto& [key, target] : numbers) keys.insert(key);
-    requireKnownKeys(c, keys, file + ": block_matching");
-    if (c.contains("enabled")) {
-      if (!c["enabled"].is_boolean()) throw InputError(file + ": block_matching.enabled must be true or false");
-      b.enabled = c["enabled"].get<bool>();
-    }
-    for (const auto& [key, target] : numbers) {
-      if (c.contains(key)) *target = number(c[key], file + ": block_matching." + key);
-    }
+  for (const auto& [section, read] : sectionReaders()) {
+    if (document.contains(section)) read(document[section], file, configuration);
   }
   if (document.contains("ranks")) {
     if (!document["ranks"].is_number_integer()) throw InputError(file + ": ranks must be a whole number");
@@ -253,6 +282,109 @@ std::string solverOptionsProblem(const std::string& options)
   }
   return "";
 }
+
+void validateMaterial(const Material& material, const std::string& where)
+{
+  if (!std::isfinite(material.youngsModulusPa) || material.youngsModulusPa <= 0) {
+    throw InputError(where + ".youngs_modulus_pa: " + std::to_string(material.youngsModulusPa) +
+                     " Pa; a positive, finite modulus is expected");
+  }
+  // Soft tissue lies within 1e2-1e5 Pa, bone near 1e10: outside 1 Pa to 1 GPa the stiffness
+  // matrix spans more orders of magnitude than the solver can resolve (1e300 gave NaN).
+  if (material.youngsModulusPa < 1.0 || material.youngsModulusPa > 1e9) {
+    std::ostringstream value;
+    value << material.youngsModulusPa;
+    throw InputError(where + ".youngs_modulus_pa: " + value.str() +
+                     " Pa is outside the physical range 1 Pa to 1e9 Pa (brain tissue: about 1e3 to 1e4 Pa)");
+  }
+  if (!std::isfinite(material.poissonRatio) || material.poissonRatio < 0 || material.poissonRatio >= 0.5) {
+    throw InputError(where + ".poisson_ratio: " + std::to_string(material.poissonRatio) +
+                     "; it must be at least 0 and below 0.5 (0.5 is incompressible: no linear elastic solution)");
+  }
+  if (material.poissonRatio >= kLockingPoissonRatio) {
+    std::ostringstream value;
+    value << material.poissonRatio;
+    throw InputError(where + ".poisson_ratio: " + value.str() +
+                     " is 0.49 or more: linear tetrahedra lock volumetrically near incompressibility (far too "
+                     "stiff, wrong displacements); use a ratio below 0.49 (0.45 is the usual value for brain)");
+  }
+}
+
+void validateMeshSettings(const Configuration& c, const std::string& source)
+{
+  if (!std::isfinite(c.meshResolutionMm) || c.meshResolutionMm < 0.5 || c.meshResolutionMm > 50) {
+    throw InputError(source + ": mesh resolution " + std::to_string(c.meshResolutionMm) + " mm is outside 0.5 to 50 mm");
+  }
+  if (c.meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
+  if (!std::isfinite(c.meshGrading) || c.meshGrading < 0 || c.meshGrading > 10) {
+    throw InputError(source + ": mesh grading " + std::to_string(c.meshGrading) + " is outside 0 (uniform) to 10");
+  }
+  if (c.meshCoarseningLevels < 0 || c.meshCoarseningLevels > 4) {
+    throw InputError(source + ": mesh coarsening levels " + std::to_string(c.meshCoarseningLevels) + " is outside 0 to 4");
+  }
+  if (!std::isfinite(c.meshRegionOfInterestRadiusMm) || c.meshRegionOfInterestRadiusMm < 0 || c.meshRegionOfInterestRadiusMm > 500 ||
+      !std::isfinite(c.meshRegionOfInterestCenterLps[0]) || !std::isfinite(c.meshRegionOfInterestCenterLps[1]) ||
+      !std::isfinite(c.meshRegionOfInterestCenterLps[2])) {
+    throw InputError(source + ": mesh region of interest radius " + std::to_string(c.meshRegionOfInterestRadiusMm) +
+                     " mm (or its centre) is not a finite size within 0 to 500 mm");
+  }
+  if (c.meshBackend != "lattice" && c.meshBackend != "cgal") {
+    throw InputError(source + ": mesh backend \"" + c.meshBackend + "\" is neither \"lattice\" nor \"cgal\"");
+  }
+  for (int label : c.meshLabels) {
+    if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
+  }
+}
+
+void validateRigidSettings(const Configuration& c, const std::string& source)
+{
+  if (!std::isfinite(c.rigidSamplingFraction) || c.rigidSamplingFraction < 0.05 || c.rigidSamplingFraction > 4) {
+    throw InputError(source + ": rigid sampling " + std::to_string(c.rigidSamplingFraction) + " is outside 0.05 to 4");
+  }
+  if (c.rigidLevels < 1 || c.rigidLevels > 3) {
+    throw InputError(source + ": rigid levels " + std::to_string(c.rigidLevels) + " is outside 1 to 3");
+  }
+}
+
+void validateClassificationSettings(const Configuration& c, const std::string& source)
+{
+  if (c.classificationK < 1 || c.classificationK > 101) {
+    throw InputError(source + ": classification k " + std::to_string(c.classificationK) + " is outside 1 to 101");
+  }
+  if (c.classificationTumourResected != "auto" && c.classificationTumourResected != "yes" && c.classificationTumourResected != "no") {
+    throw InputError(source + ": classification tumour_resected '" + c.classificationTumourResected + "' is not one of auto, yes, no");
+  }
+  if (c.classificationRefinementPasses && *c.classificationRefinementPasses > 10) {
+    throw InputError(source + ": classification refinement passes " + std::to_string(*c.classificationRefinementPasses) +
+                     " is outside 0 to 10");
+  }
+  if (!std::isfinite(c.classificationRefinementToleranceMm) || c.classificationRefinementToleranceMm <= 0 ||
+      c.classificationRefinementToleranceMm > 10) {
+    throw InputError(source + ": classification refinement tolerance " + std::to_string(c.classificationRefinementToleranceMm) +
+                     " mm is outside 0 to 10 mm");
+  }
+  if (!std::isfinite(c.classificationRefinementReachMm) || c.classificationRefinementReachMm < 0 || c.classificationRefinementReachMm > 200) {
+    throw InputError(source + ": classification refinement reach " + std::to_string(c.classificationRefinementReachMm) +
+                     " mm is outside 0 to 200 mm");
+  }
+  if (!std::isfinite(c.classificationSaturationMm) || c.classificationSaturationMm <= 0 || c.classificationSaturationMm > 100) {
+    throw InputError(source + ": classification saturation " + std::to_string(c.classificationSaturationMm) + " mm is outside 0 to 100 mm");
+  }
+}
+
+void validateSurfaceSettings(const Configuration& c, const std::string& source)
+{
+  if (!std::isfinite(c.surfaceMembraneWeight) || c.surfaceMembraneWeight < 0 || c.surfaceMembraneWeight > 1000 ||
+      !std::isfinite(c.surfaceBendingWeight) || c.surfaceBendingWeight < 0 || c.surfaceBendingWeight > 1000) {
+    throw InputError(source + ": surface membrane and bending weights must be within 0 to 1000");
+  }
+  if (!std::isfinite(c.surfaceImageWeight) || c.surfaceImageWeight < 0 || c.surfaceImageWeight > 1) {
+    throw InputError(source + ": surface image weight " + std::to_string(c.surfaceImageWeight) + " is outside 0 to 1");
+  }
+  if (c.surfaceMaximumIterations < 1 || c.surfaceMaximumIterations > 100000) {
+    throw InputError(source + ": surface max_iterations " + std::to_string(c.surfaceMaximumIterations) + " is outside 1 to 100000");
+  }
+}
 } // namespace
 
 void Configuration::validate(const std::string& source) const
@@ -260,91 +392,11 @@ void Configuration::validate(const std::string& source) const
   if (const std::string problem = solverOptionsProblem(solverOptions); !problem.empty()) {
     throw InputError(source + ": solver options \"" + solverOptions + "\": " + problem);
   }
-  for (const auto& [label, material] : materials) {
-    const std::string where = source + ": materials." + std::to_string(label);
-    if (!std::isfinite(material.youngsModulusPa) || material.youngsModulusPa <= 0) {
-      throw InputError(where + ".youngs_modulus_pa: " + std::to_string(material.youngsModulusPa) +
-                       " Pa; a positive, finite modulus is expected");
-    }
-    // Soft tissue lies within 1e2-1e5 Pa, bone near 1e10: outside 1 Pa to 1 GPa the stiffness
-    // matrix spans more orders of magnitude than the solver can resolve (1e300 gave NaN).
-    if (material.youngsModulusPa < 1.0 || material.youngsModulusPa > 1e9) {
-      std::ostringstream value;
-      value << material.youngsModulusPa;
-      throw InputError(where + ".youngs_modulus_pa: " + value.str() +
-                       " Pa is outside the physical range 1 Pa to 1e9 Pa (brain tissue: about 1e3 to 1e4 Pa)");
-    }
-    if (!std::isfinite(material.poissonRatio) || material.poissonRatio < 0 || material.poissonRatio >= 0.5) {
-      throw InputError(where + ".poisson_ratio: " + std::to_string(material.poissonRatio) +
-                       "; it must be at least 0 and below 0.5 (0.5 is incompressible: no linear elastic solution)");
-    }
-    if (material.poissonRatio >= kLockingPoissonRatio) {
-      std::ostringstream value;
-      value << material.poissonRatio;
-      throw InputError(where + ".poisson_ratio: " + value.str() +
-                       " is 0.49 or more: linear tetrahedra lock volumetrically near incompressibility (far too "
-                       "stiff, wrong displacements); use a ratio below 0.49 (0.45 is the usual value for brain)");
-    }
-  }
-  if (!std::isfinite(meshResolutionMm) || meshResolutionMm < 0.5 || meshResolutionMm > 50) {
-    throw InputError(source + ": mesh resolution " + std::to_string(meshResolutionMm) + " mm is outside 0.5 to 50 mm");
-  }
-  if (meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
-  if (!std::isfinite(meshGrading) || meshGrading < 0 || meshGrading > 10) {
-    throw InputError(source + ": mesh grading " + std::to_string(meshGrading) + " is outside 0 (uniform) to 10");
-  }
-  if (meshCoarseningLevels < 0 || meshCoarseningLevels > 4) {
-    throw InputError(source + ": mesh coarsening levels " + std::to_string(meshCoarseningLevels) + " is outside 0 to 4");
-  }
-  if (!std::isfinite(meshRegionOfInterestRadiusMm) || meshRegionOfInterestRadiusMm < 0 || meshRegionOfInterestRadiusMm > 500 ||
-      !std::isfinite(meshRegionOfInterestCenterLps[0]) || !std::isfinite(meshRegionOfInterestCenterLps[1]) ||
-      !std::isfinite(meshRegionOfInterestCenterLps[2])) {
-    throw InputError(source + ": mesh region of interest radius " + std::to_string(meshRegionOfInterestRadiusMm) +
-                     " mm (or its centre) is not a finite size within 0 to 500 mm");
-  }
-  if (meshBackend != "lattice" && meshBackend != "cgal") {
-    throw InputError(source + ": mesh backend \"" + meshBackend + "\" is neither \"lattice\" nor \"cgal\"");
-  }
-  for (int label : meshLabels) {
-    if (label <= 0 || label > 65535) throw InputError(source + ": mesh label " + std::to_string(label) + " is not a tissue label");
-  }
-  if (!std::isfinite(rigidSamplingFraction) || rigidSamplingFraction < 0.05 || rigidSamplingFraction > 4) {
-    throw InputError(source + ": rigid sampling " + std::to_string(rigidSamplingFraction) + " is outside 0.05 to 4");
-  }
-  if (rigidLevels < 1 || rigidLevels > 3) {
-    throw InputError(source + ": rigid levels " + std::to_string(rigidLevels) + " is outside 1 to 3");
-  }
-  if (classificationK < 1 || classificationK > 101) {
-    throw InputError(source + ": classification k " + std::to_string(classificationK) + " is outside 1 to 101");
-  }
-  if (classificationTumourResected != "auto" && classificationTumourResected != "yes" && classificationTumourResected != "no") {
-    throw InputError(source + ": classification tumour_resected '" + classificationTumourResected + "' is not one of auto, yes, no");
-  }
-  if (classificationRefinementPasses && *classificationRefinementPasses > 10) {
-    throw InputError(source + ": classification refinement passes " + std::to_string(*classificationRefinementPasses) + " is outside 0 to 10");
-  }
-  if (!std::isfinite(classificationRefinementToleranceMm) || classificationRefinementToleranceMm <= 0 ||
-      classificationRefinementToleranceMm > 10) {
-    throw InputError(source + ": classification refinement tolerance " + std::to_string(classificationRefinementToleranceMm) +
-                     " mm is outside 0 to 10 mm");
-  }
-  if (!std::isfinite(classificationRefinementReachMm) || classificationRefinementReachMm < 0 || classificationRefinementReachMm > 200) {
-    throw InputError(source + ": classification refinement reach " + std::to_string(classificationRefinementReachMm) +
-                     " mm is outside 0 to 200 mm");
-  }
-  if (!std::isfinite(classificationSaturationMm) || classificationSaturationMm <= 0 || classificationSaturationMm > 100) {
-    throw InputError(source + ": classification saturation " + std::to_string(classificationSaturationMm) + " mm is outside 0 to 100 mm");
-  }
-  if (!std::isfinite(surfaceMembraneWeight) || surfaceMembraneWeight < 0 || surfaceMembraneWeight > 1000 ||
-      !std::isfinite(surfaceBendingWeight) || surfaceBendingWeight < 0 || surfaceBendingWeight > 1000) {
-    throw InputError(source + ": surface membrane and bending weights must be within 0 to 1000");
-  }
-  if (!std::isfinite(surfaceImageWeight) || surfaceImageWeight < 0 || surfaceImageWeight > 1) {
-    throw InputError(source + ": surface image weight " + std::to_string(surfaceImageWeight) + " is outside 0 to 1");
-  }
-  if (surfaceMaximumIterations < 1 || surfaceMaximumIterations > 100000) {
-    throw InputError(source + ": surface max_iterations " + std::to_string(surfaceMaximumIterations) + " is outside 1 to 100000");
-  }
+  for (const auto& [label, material] : materials) validateMaterial(material, source + ": materials." + std::to_string(label));
+  validateMeshSettings(*this, source);
+  validateRigidSettings(*this, source);
+  validateClassificationSettings(*this, source);
+  validateSurfaceSettings(*this, source);
   if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
   validateBlockMatching(source);
 }

@@ -27,37 +27,38 @@ using Domain = CGAL::Labeled_mesh_domain_3<Kernel>;
 using Triangulation = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_tag>::type;
 using Complex = CGAL::Mesh_complex_3_in_triangulation_3<Triangulation>;
 using Criteria = CGAL::Mesh_criteria_3<Triangulation>;
-} // namespace
+/// The chosen tissues' index box in the label map; values are 1 + the tissue's place in the list.
+struct TissueBox {
+  long lo[3], hi[3];
+};
 
-bool cgalMeshingAvailable() { return true; }
-
-TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const MeshingParameters& parameters)
+TissueBox tissueBoxOf(const LabelImage& image, const std::vector<unsigned char>& valueOf)
 {
-  // The chosen tissues' box (with two voxels of background around it) as an 8-bit image whose
-  // values are 1 + the tissue's place in the list; every other label is background (0).
-  const std::vector<int> tissues = [&] {
-    std::set<int> s(parameters.labels.begin(), parameters.labels.end());
-    return std::vector<int>(s.begin(), s.end());
-  }();
-  if (tissues.size() > 254) throw InputError("meshing: the CGAL backend meshes at most 254 tissues");
   const auto size = image.GetLargestPossibleRegion().GetSize();
   const LabelPixel* voxels = image.GetBufferPointer();
-  std::vector<unsigned char> valueOf(65536, 0);
-  for (std::size_t t = 0; t < tissues.size(); ++t) valueOf[std::size_t(tissues[t])] = (unsigned char)(t + 1);
-  long lo[3] = {long(size[0]), long(size[1]), long(size[2])}, hi[3] = {-1, -1, -1};
+  TissueBox box{{long(size[0]), long(size[1]), long(size[2])}, {-1, -1, -1}};
   for (std::size_t k = 0; k < size[2]; ++k) {
     for (std::size_t j = 0; j < size[1]; ++j) {
       for (std::size_t i = 0; i < size[0]; ++i) {
         if (!valueOf[voxels[i + size[0] * (j + size[1] * k)]]) continue;
         const long idx[3] = {long(i), long(j), long(k)};
         for (int d = 0; d < 3; ++d) {
-          lo[d] = std::min(lo[d], idx[d]);
-          hi[d] = std::max(hi[d], idx[d]);
+          box.lo[d] = std::min(box.lo[d], idx[d]);
+          box.hi[d] = std::max(box.hi[d], idx[d]);
         }
       }
     }
   }
-  if (hi[0] < 0) throw InputError("meshing: the label map holds none of the tissues to mesh");
+  if (box.hi[0] < 0) throw InputError("meshing: the label map holds none of the tissues to mesh");
+  return box;
+}
+
+/// The box (grown by two voxels of background; `lo` moved accordingly) as CGAL's 8-bit image of
+/// tissue values, every other label background (0).
+CGAL::Image_3 tissueImageOf(const LabelImage& image, const std::vector<unsigned char>& valueOf, long lo[3], const long hi[3])
+{
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
   std::size_t dims[3];
   for (int d = 0; d < 3; ++d) {
     lo[d] -= 2;
@@ -79,8 +80,12 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
     }
   }
   raw->tx = raw->ty = raw->tz = 0;
-  const CGAL::Image_3 cgalImage(raw); // owns the buffer
+  return CGAL::Image_3(raw); // owns the buffer
+}
 
+/// CGAL Mesh_3 on the tissue image into `complex`: facets and cells of about h mm.
+void refineTissueMesh(const CGAL::Image_3& cgalImage, double h, double finest, Complex& complex)
+{
   // Determinism: CGAL draws from its default generator (perturbation, initial points) and from
   // the domain's; both are seeded.
   CGAL::get_default_random() = CGAL::Random(2000);
@@ -88,8 +93,6 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
   namespace p = CGAL::parameters;
   const Domain domain = Domain::create_labeled_image_mesh_domain(p::image = cgalImage, p::relative_error_bound = 1e-6,
                                                                   p::p_rng = &domainRandom);
-  const double h = parameters.resolutionMm;
-  double finest = std::min({double(spacing[0]), double(spacing[1]), double(spacing[2])});
   // The surface may stray a quarter of the resolution from the boundary (half a voxel at least):
   // the lattice's snapping stays within about that, and finer tolerances refine every sulcus.
   const Criteria criteria(p::facet_angle = 25, p::facet_size = h, p::facet_distance = std::max(0.5 * finest, 0.25 * h),
@@ -100,7 +103,6 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
   // of a tissue's own surface may stay non-manifold (the union's surface is closed).
   // Seeded from every connected component of every tissue (CGAL's labelled-image initialisation):
   // the default initialisation shoots random rays and misses thin tissues such as the ventricles.
-  Complex complex;
   {
     // It reports its progress on std::cout; the command line's output is ours.
     std::ostringstream quiet;
@@ -109,8 +111,14 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
     std::cout.rdbuf(console);
   }
   CGAL::refine_mesh_3(complex, domain, criteria, p::perturb(p::time_limit = 0, p::sliver_bound = 10), p::exude(p::time_limit = 0, p::sliver_bound = 10));
+}
 
-  // Back to LPS: CGAL's point x is the continuous index x / spacing + lo of the ITK image.
+/// The complex's tissue cells, back in LPS (CGAL's point x is the continuous index x / spacing + lo
+/// of the ITK image), each positively oriented.
+TetrahedralMeshArrays tetrahedraOfComplex(const Complex& complex, const LabelImage& image, const long lo[3],
+                                          const std::vector<int>& tissues)
+{
+  const auto spacing = image.GetSpacing();
   TetrahedralMeshArrays mesh;
   std::map<Triangulation::Vertex_handle, long long> nodeOf;
   auto node = [&](Triangulation::Vertex_handle v) {
@@ -144,6 +152,28 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const Meshin
     mesh.labels.push_back(tissues[std::size_t(value - 1)]);
   }
   return mesh;
+}
+} // namespace
+
+bool cgalMeshingAvailable() { return true; }
+
+TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage& image, const MeshingParameters& parameters)
+{
+  // The chosen tissues' box (with two voxels of background around it) as an 8-bit image whose
+  // values are 1 + the tissue's place in the list; every other label is background (0).
+  const std::vector<int> tissues = [&] {
+    std::set<int> s(parameters.labels.begin(), parameters.labels.end());
+    return std::vector<int>(s.begin(), s.end());
+  }();
+  if (tissues.size() > 254) throw InputError("meshing: the CGAL backend meshes at most 254 tissues");
+  std::vector<unsigned char> valueOf(65536, 0);
+  for (std::size_t t = 0; t < tissues.size(); ++t) valueOf[std::size_t(tissues[t])] = (unsigned char)(t + 1);
+  TissueBox box = tissueBoxOf(image, valueOf);
+  const CGAL::Image_3 cgalImage = tissueImageOf(image, valueOf, box.lo, box.hi);
+  const auto spacing = image.GetSpacing();
+  Complex complex;
+  refineTissueMesh(cgalImage, parameters.resolutionMm, std::min({double(spacing[0]), double(spacing[1]), double(spacing[2])}), complex);
+  return tetrahedraOfComplex(complex, image, box.lo, tissues);
 }
 
 } // namespace brainshift

@@ -16,6 +16,7 @@
 #include <cstring>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <string>
 #include <array>
@@ -126,101 +127,267 @@ void MeshingParameters::validate(const LabelImage& image) const
 }
 
 namespace {
+/// The fine lattice in the label map's continuous index space: cells of `step` voxels from `start`.
+struct FineLattice {
+  double start[3], step[3];
+  std::array<int, 3> cells{};
+
+  std::size_t cellIndex(long i, long j, long k) const
+  {
+    return std::size_t(i) + std::size_t(cells[0]) * (std::size_t(j) + std::size_t(cells[1]) * std::size_t(k));
+  }
+  std::size_t cellCount() const { return std::size_t(cells[0]) * std::size_t(cells[1]) * std::size_t(cells[2]); }
+};
+
+/// Whether the voxels a fine cell spans (its voxel centres, and at least the nearest one along
+/// each axis) hold two classes: two chosen tissues, or one and the outside. Cells touching the
+/// image's border from outside hold only "outside".
+bool cellHoldsTwoClasses(const LabelImage& image, const std::set<int>& chosen, const FineLattice& grid, long i, long j, long k)
+{
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
+  const long cell[3] = {i, j, k};
+  long from[3], to[3];
+  bool outsideImage = false;
+  for (int d = 0; d < 3; ++d) {
+    const double a = grid.start[d] + double(cell[d]) * grid.step[d], b = a + grid.step[d];
+    from[d] = std::max(0L, long(std::floor(a)));
+    to[d] = std::min(long(size[unsigned(d)]) - 1, long(std::ceil(b)));
+    if (from[d] > to[d]) outsideImage = true;
+  }
+  if (outsideImage) return false;
+  int first = -1;
+  for (long z = from[2]; z <= to[2]; ++z) {
+    for (long y = from[1]; y <= to[1]; ++y) {
+      const LabelPixel* row = voxels + size[0] * (std::size_t(y) + size[1] * std::size_t(z));
+      for (long x = from[0]; x <= to[0]; ++x) {
+        const int c = chosen.count(row[x]) ? int(row[x]) : 0;
+        if (first < 0) first = c;
+        else if (c != first) return true;
+      }
+    }
+  }
+  return false;
+}
+
+/// Zero distance for the cells whose centre lies in the sphere.
+void markRegionOfInterest(const LabelImage& image, const MeshingParameters::Sphere& roi, const FineLattice& grid, std::vector<float>& distance)
+{
+  for (long k = 0; k < grid.cells[2]; ++k) {
+    for (long j = 0; j < grid.cells[1]; ++j) {
+      for (long i = 0; i < grid.cells[0]; ++i) {
+        itk::ContinuousIndex<double, 3> c;
+        c[0] = grid.start[0] + (double(i) + 0.5) * grid.step[0];
+        c[1] = grid.start[1] + (double(j) + 0.5) * grid.step[1];
+        c[2] = grid.start[2] + (double(k) + 0.5) * grid.step[2];
+        PhysicalPoint p;
+        image.TransformContinuousIndexToPhysicalPoint(c, p);
+        double r2 = 0;
+        for (int d = 0; d < 3; ++d) r2 += (p[d] - roi.centerLps[std::size_t(d)]) * (p[d] - roi.centerLps[std::size_t(d)]);
+        if (r2 <= roi.radiusMm * roi.radiusMm) distance[grid.cellIndex(i, j, k)] = 0;
+      }
+    }
+  }
+}
+
+/// One chamfer pass (3x3x3 neighbourhood, weights for cubes of edge h), forwards or backwards:
+/// each cell takes the nearest of the 13 neighbours already visited in the pass's order.
+void chamferPass(std::vector<float>& distance, const FineLattice& grid, float h, bool forwards)
+{
+  const float far = std::numeric_limits<float>::max();
+  const float w[4] = {0.0f, h, h * float(std::sqrt(2.0)), h * float(std::sqrt(3.0))};
+  const int sign = forwards ? 1 : -1;
+  const auto& cells = grid.cells;
+  for (long kk = 0; kk < cells[2]; ++kk) {
+    const long k = forwards ? kk : cells[2] - 1 - kk;
+    for (long jj = 0; jj < cells[1]; ++jj) {
+      const long j = forwards ? jj : cells[1] - 1 - jj;
+      for (long ii = 0; ii < cells[0]; ++ii) {
+        const long i = forwards ? ii : cells[0] - 1 - ii;
+        float best = distance[grid.cellIndex(i, j, k)];
+        for (int dk = -1; dk <= 0; ++dk) {
+          for (int dj = -1; dj <= 1; ++dj) {
+            for (int di = -1; di <= 1; ++di) {
+              if (dk == 0 && (dj > 0 || (dj == 0 && di >= 0))) continue;
+              const long a = i + sign * di, b = j + sign * dj, c = k + sign * dk;
+              if (a < 0 || b < 0 || c < 0 || a >= cells[0] || b >= cells[1] || c >= cells[2]) continue;
+              const float there = distance[grid.cellIndex(a, b, c)];
+              if (there < far) best = std::min(best, there + w[std::abs(di) + std::abs(dj) + std::abs(dk)]);
+            }
+          }
+        }
+        distance[grid.cellIndex(i, j, k)] = best;
+      }
+    }
+  }
+}
+
 /// Distance (mm) from each cell of the fine lattice to the nearest cell where the mesh must be
 /// fine: one whose voxels hold two classes (a tissue interface, or a tissue against the outside)
 /// or whose centre lies in the region of interest. Chamfer distance (3x3x3, two passes).
 std::vector<float> distanceToFeatures(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
-                                      const double start[3], const double step[3], const std::array<int, 3>& cells)
+                                      const FineLattice& grid)
 {
-  const auto size = image.GetLargestPossibleRegion().GetSize();
-  const LabelPixel* voxels = image.GetBufferPointer();
-  const std::size_t cellCount = std::size_t(cells[0]) * std::size_t(cells[1]) * std::size_t(cells[2]);
-  const float far = std::numeric_limits<float>::max();
-  std::vector<float> distance(cellCount, far);
-  auto cellIndex = [&](long i, long j, long k) { return std::size_t(i) + std::size_t(cells[0]) * (std::size_t(j) + std::size_t(cells[1]) * std::size_t(k)); };
-  for (long k = 0; k < cells[2]; ++k) {
-    for (long j = 0; j < cells[1]; ++j) {
-      for (long i = 0; i < cells[0]; ++i) {
-        const long cell[3] = {i, j, k};
-        // The voxels whose centres the cell spans, and at least the nearest one along each axis.
-        long from[3], to[3];
-        bool outsideImage = false;
-        for (int d = 0; d < 3; ++d) {
-          const double a = start[d] + double(cell[d]) * step[d], b = a + step[d];
-          from[d] = std::max(0L, long(std::floor(a)));
-          to[d] = std::min(long(size[unsigned(d)]) - 1, long(std::ceil(b)));
-          if (from[d] > to[d]) outsideImage = true;
-        }
-        int first = -1;
-        bool mixed = false;
-        if (outsideImage) first = 0;
-        for (long z = from[2]; z <= to[2] && !mixed && !outsideImage; ++z) {
-          for (long y = from[1]; y <= to[1] && !mixed; ++y) {
-            const LabelPixel* row = voxels + size[0] * (std::size_t(y) + size[1] * std::size_t(z));
-            for (long x = from[0]; x <= to[0]; ++x) {
-              const int c = chosen.count(row[x]) ? int(row[x]) : 0;
-              if (first < 0) first = c;
-              else if (c != first) {
-                mixed = true;
-                break;
-              }
-            }
-          }
-        }
-        // Cells touching the image's border from outside hold only "outside"; the brain's surface
-        // is found from the cells inside.
-        if (mixed) distance[cellIndex(i, j, k)] = 0;
+  std::vector<float> distance(grid.cellCount(), std::numeric_limits<float>::max());
+  for (long k = 0; k < grid.cells[2]; ++k) {
+    for (long j = 0; j < grid.cells[1]; ++j) {
+      for (long i = 0; i < grid.cells[0]; ++i) {
+        if (cellHoldsTwoClasses(image, chosen, grid, i, j, k)) distance[grid.cellIndex(i, j, k)] = 0;
       }
     }
   }
-  if (parameters.regionOfInterest) {
-    const auto& roi = *parameters.regionOfInterest;
-    for (long k = 0; k < cells[2]; ++k) {
-      for (long j = 0; j < cells[1]; ++j) {
-        for (long i = 0; i < cells[0]; ++i) {
-          itk::ContinuousIndex<double, 3> c;
-          c[0] = start[0] + (double(i) + 0.5) * step[0];
-          c[1] = start[1] + (double(j) + 0.5) * step[1];
-          c[2] = start[2] + (double(k) + 0.5) * step[2];
-          PhysicalPoint p;
-          image.TransformContinuousIndexToPhysicalPoint(c, p);
-          double r2 = 0;
-          for (int d = 0; d < 3; ++d) r2 += (p[d] - roi.centerLps[std::size_t(d)]) * (p[d] - roi.centerLps[std::size_t(d)]);
-          if (r2 <= roi.radiusMm * roi.radiusMm) distance[cellIndex(i, j, k)] = 0;
-        }
-      }
-    }
-  }
-  // Two chamfer passes: the cells are cubes of resolutionMm.
-  const float h = float(parameters.resolutionMm);
-  const float w[4] = {0.0f, h, h * float(std::sqrt(2.0)), h * float(std::sqrt(3.0))};
-  for (int pass = 0; pass < 2; ++pass) {
-    const int sign = pass == 0 ? 1 : -1;
-    for (long kk = 0; kk < cells[2]; ++kk) {
-      const long k = pass == 0 ? kk : cells[2] - 1 - kk;
-      for (long jj = 0; jj < cells[1]; ++jj) {
-        const long j = pass == 0 ? jj : cells[1] - 1 - jj;
-        for (long ii = 0; ii < cells[0]; ++ii) {
-          const long i = pass == 0 ? ii : cells[0] - 1 - ii;
-          float best = distance[cellIndex(i, j, k)];
-          // The 13 neighbours already visited in this pass's order.
-          for (int dk = -1; dk <= 0; ++dk) {
-            for (int dj = -1; dj <= 1; ++dj) {
-              for (int di = -1; di <= 1; ++di) {
-                if (dk == 0 && (dj > 0 || (dj == 0 && di >= 0))) continue;
-                const long a = i + sign * di, b = j + sign * dj, c = k + sign * dk;
-                if (a < 0 || b < 0 || c < 0 || a >= cells[0] || b >= cells[1] || c >= cells[2]) continue;
-                const float there = distance[cellIndex(a, b, c)];
-                if (there < far) best = std::min(best, there + w[std::abs(di) + std::abs(dj) + std::abs(dk)]);
-              }
-            }
-          }
-          distance[cellIndex(i, j, k)] = best;
-        }
-      }
-    }
-  }
+  if (parameters.regionOfInterest) markRegionOfInterest(image, *parameters.regionOfInterest, grid, distance);
+  const float h = float(parameters.resolutionMm); // the cells are cubes of resolutionMm
+  chamferPass(distance, grid, h, true);
+  chamferPass(distance, grid, h, false);
   return distance;
+}
+
+/// The lattice tetrahedra near the meshed ones (sharing a node with one), the tetrahedra around
+/// each node among them (compressed rows) and, for each, the neighbour across each face (-1: none).
+struct NearTetrahedra {
+  std::vector<int> tetrahedra;
+  std::vector<int> start, around; ///< node v's: around[start[v] .. start[v + 1])
+  std::vector<int> index;         ///< of each lattice tetrahedron in `tetrahedra` (-1: not near)
+  std::vector<std::array<int, 4>> across;
+};
+
+/// Face f of a tetrahedron: its corners, outward order.
+constexpr int FaceCorners[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+
+bool holdsNode(const KuhnLattice& lattice, int t, int v)
+{
+  const auto& q = lattice.tetrahedra[std::size_t(t)];
+  return q[0] == v || q[1] == v || q[2] == v || q[3] == v;
+}
+
+void findFaceNeighbours(const KuhnLattice& lattice, NearTetrahedra& near)
+{
+  near.across.resize(near.tetrahedra.size());
+  for (int t : near.tetrahedra) {
+    const auto& q = lattice.tetrahedra[std::size_t(t)];
+    std::array<int, 4> neighbours{-1, -1, -1, -1};
+    for (int f = 0; f < 4; ++f) {
+      const int a = q[std::size_t(FaceCorners[f][0])], b = q[std::size_t(FaceCorners[f][1])], c = q[std::size_t(FaceCorners[f][2])];
+      for (int r = near.start[std::size_t(a)]; r < near.start[std::size_t(a) + 1]; ++r) {
+        const int u = near.around[std::size_t(r)];
+        if (u != t && holdsNode(lattice, u, b) && holdsNode(lattice, u, c)) {
+          neighbours[std::size_t(f)] = u;
+          break;
+        }
+      }
+    }
+    near.across[std::size_t(near.index[std::size_t(t)])] = neighbours;
+  }
+}
+
+NearTetrahedra nearTetrahedraOf(const KuhnLattice& lattice, const std::vector<int>& tissueOf)
+{
+  const std::size_t n = lattice.tetrahedra.size();
+  std::vector<char> nodeNearTissue(lattice.nodes.size(), 0);
+  for (std::size_t t = 0; t < n; ++t) {
+    if (tissueOf[t] < 0) continue;
+    for (int v : lattice.tetrahedra[t]) nodeNearTissue[std::size_t(v)] = 1;
+  }
+  NearTetrahedra near;
+  for (std::size_t t = 0; t < n; ++t) {
+    const auto& q = lattice.tetrahedra[t];
+    if (nodeNearTissue[std::size_t(q[0])] || nodeNearTissue[std::size_t(q[1])] || nodeNearTissue[std::size_t(q[2])] ||
+        nodeNearTissue[std::size_t(q[3])]) {
+      near.tetrahedra.push_back(int(t));
+    }
+  }
+  near.start.assign(lattice.nodes.size() + 1, 0);
+  near.around.resize(4 * near.tetrahedra.size());
+  for (int t : near.tetrahedra) {
+    for (int v : lattice.tetrahedra[std::size_t(t)]) near.start[std::size_t(v) + 1] += 1;
+  }
+  for (std::size_t v = 0; v < lattice.nodes.size(); ++v) near.start[v + 1] += near.start[v];
+  std::vector<int> fill(near.start.begin(), near.start.end() - 1);
+  for (int t : near.tetrahedra) {
+    for (int v : lattice.tetrahedra[std::size_t(t)]) near.around[std::size_t(fill[std::size_t(v)]++)] = t;
+  }
+  near.index.assign(n, -1);
+  for (std::size_t r = 0; r < near.tetrahedra.size(); ++r) near.index[std::size_t(near.tetrahedra[r])] = int(r);
+  findFaceNeighbours(lattice, near);
+  return near;
+}
+
+/// What the repair works on: the lattice, its tetrahedra near the tissues, each tetrahedron's
+/// tissue (-1: not meshed; changed by the repair) and whether it has joined a tissue already.
+struct TopologyRepair {
+  const KuhnLattice& lattice;
+  const NearTetrahedra& near;
+  std::vector<int>& tissueOf;
+  std::vector<char> joined;
+
+  /// In `region`: a tissue, or -2 for the union of the chosen tissues.
+  bool inRegion(int region, int t) const
+  {
+    if (t < 0) return false;
+    const int l = tissueOf[std::size_t(t)];
+    return region == -2 ? l >= 0 : l == region;
+  }
+};
+
+/// The edges of the region's boundary with more than two boundary triangles on them, in a fixed
+/// order (the repairs depend on it), as (smaller node << 32 | larger node).
+std::vector<std::uint64_t> nonManifoldEdgesOf(int region, const TopologyRepair& repair)
+{
+  std::unordered_map<std::uint64_t, int> edgeCount;
+  for (int t : repair.near.tetrahedra) {
+    if (!repair.inRegion(region, t)) continue;
+    const auto& q = repair.lattice.tetrahedra[std::size_t(t)];
+    const auto& neighbours = repair.near.across[std::size_t(repair.near.index[std::size_t(t)])];
+    for (int f = 0; f < 4; ++f) {
+      if (repair.inRegion(region, neighbours[std::size_t(f)])) continue;
+      for (int e = 0; e < 3; ++e) {
+        const std::uint64_t u = std::uint64_t(q[std::size_t(FaceCorners[f][e])]), w = std::uint64_t(q[std::size_t(FaceCorners[f][(e + 1) % 3])]);
+        edgeCount[(std::min(u, w) << 32) | std::max(u, w)] += 1;
+      }
+    }
+  }
+  std::vector<std::uint64_t> nonManifold;
+  for (const auto& [key, count] : edgeCount) {
+    if (count > 2) nonManifold.push_back(key);
+  }
+  std::sort(nonManifold.begin(), nonManifold.end());
+  return nonManifold;
+}
+
+/// The tetrahedra around the edge that are not in the region join it (the union: its most common
+/// tissue around the edge), each at most once; returns how many joined.
+std::size_t joinAroundEdge(std::uint64_t key, int region, TopologyRepair& repair)
+{
+  const int a = int(key >> 32), b = int(key & 0xffffffffu);
+  std::vector<int> ring;
+  std::map<int, int> count;
+  for (int r = repair.near.start[std::size_t(a)]; r < repair.near.start[std::size_t(a) + 1]; ++r) {
+    const int t = repair.near.around[std::size_t(r)];
+    if (!holdsNode(repair.lattice, t, b)) continue;
+    ring.push_back(t);
+    if (repair.inRegion(region, t)) count[repair.tissueOf[std::size_t(t)]] += 1;
+  }
+  int fill = region;
+  if (region == -2) {
+    int best = 0;
+    for (const auto& [l, c] : count) {
+      if (c > best) {
+        best = c;
+        fill = l;
+      }
+    }
+  }
+  std::size_t joinedNow = 0;
+  for (int t : ring) {
+    // A tetrahedron changes tissue once: two tissues must not trade it back and forth.
+    if (!repair.inRegion(region, t) && !repair.joined[std::size_t(t)]) {
+      repair.tissueOf[std::size_t(t)] = fill;
+      repair.joined[std::size_t(t)] = 1;
+      ++joinedNow;
+    }
+  }
+  return joinedNow;
 }
 
 /// Topology repair: labelling by centroid can leave a region touching itself only along an edge
@@ -229,59 +396,9 @@ std::vector<float> distanceToFeatures(const LabelImage& image, const MeshingPara
 /// tissues and of each tissue has exactly two triangles. `tissueOf` is -1 for the unmeshed.
 std::size_t repairNonManifoldEdges(const KuhnLattice& lattice, std::vector<int>& tissueOf, const std::set<int>& chosen, Warnings& warnings)
 {
-  const std::size_t n = lattice.tetrahedra.size();
-  // Only the tetrahedra touching a meshed one can take part.
-  std::vector<char> nodeNearTissue(lattice.nodes.size(), 0);
-  for (std::size_t t = 0; t < n; ++t) {
-    if (tissueOf[t] < 0) continue;
-    for (int v : lattice.tetrahedra[t]) nodeNearTissue[std::size_t(v)] = 1;
-  }
-  std::vector<int> near;
-  for (std::size_t t = 0; t < n; ++t) {
-    const auto& q = lattice.tetrahedra[t];
-    if (nodeNearTissue[std::size_t(q[0])] || nodeNearTissue[std::size_t(q[1])] || nodeNearTissue[std::size_t(q[2])] ||
-        nodeNearTissue[std::size_t(q[3])]) {
-      near.push_back(int(t));
-    }
-  }
-  // Tetrahedra around each node (compressed rows) and the neighbour across each face.
-  std::vector<int> start(lattice.nodes.size() + 1, 0), around(4 * near.size());
-  for (int t : near) {
-    for (int v : lattice.tetrahedra[std::size_t(t)]) start[std::size_t(v) + 1] += 1;
-  }
-  for (std::size_t v = 0; v < lattice.nodes.size(); ++v) start[v + 1] += start[v];
-  {
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (int t : near) {
-      for (int v : lattice.tetrahedra[std::size_t(t)]) around[std::size_t(fill[std::size_t(v)]++)] = t;
-    }
-  }
-  auto holds = [&](int t, int v) {
-    const auto& q = lattice.tetrahedra[std::size_t(t)];
-    return q[0] == v || q[1] == v || q[2] == v || q[3] == v;
-  };
-  static const int faceCorners[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
-  std::vector<int> nearIndex(n, -1);
-  for (std::size_t r = 0; r < near.size(); ++r) nearIndex[std::size_t(near[r])] = int(r);
-  std::vector<std::array<int, 4>> across(near.size());
-  for (int t : near) {
-    const auto& q = lattice.tetrahedra[std::size_t(t)];
-    std::array<int, 4> neighbours{-1, -1, -1, -1};
-    for (int f = 0; f < 4; ++f) {
-      const int a = q[std::size_t(faceCorners[f][0])], b = q[std::size_t(faceCorners[f][1])], c = q[std::size_t(faceCorners[f][2])];
-      for (int r = start[std::size_t(a)]; r < start[std::size_t(a) + 1]; ++r) {
-        const int u = around[std::size_t(r)];
-        if (u != t && holds(u, b) && holds(u, c)) {
-          neighbours[std::size_t(f)] = u;
-          break;
-        }
-      }
-    }
-    across[std::size_t(nearIndex[std::size_t(t)])] = neighbours;
-  }
-
+  const NearTetrahedra near = nearTetrahedraOf(lattice, tissueOf);
+  TopologyRepair repair{lattice, near, tissueOf, std::vector<char>(lattice.tetrahedra.size(), 0)};
   std::size_t repaired = 0;
-  std::vector<char> joined(n, 0);
   std::size_t remaining = 0; // non-manifold edges seen in the last pass
   for (int pass = 0; pass < 30; ++pass) {
     bool changed = false;
@@ -289,59 +406,12 @@ std::size_t repairNonManifoldEdges(const KuhnLattice& lattice, std::vector<int>&
     std::vector<int> regions{-2}; // -2: the union of the chosen tissues
     regions.insert(regions.end(), chosen.begin(), chosen.end());
     for (int region : regions) {
-      auto inRegion = [&](int t) {
-        if (t < 0) return false;
-        const int l = tissueOf[std::size_t(t)];
-        return region == -2 ? l >= 0 : l == region;
-      };
-      std::unordered_map<std::uint64_t, int> edgeCount;
-      for (int t : near) {
-        if (!inRegion(t)) continue;
-        const auto& q = lattice.tetrahedra[std::size_t(t)];
-        const auto& neighbours = across[std::size_t(nearIndex[std::size_t(t)])];
-        for (int f = 0; f < 4; ++f) {
-          if (inRegion(neighbours[std::size_t(f)])) continue;
-          for (int e = 0; e < 3; ++e) {
-            const std::uint64_t u = std::uint64_t(q[std::size_t(faceCorners[f][e])]), w = std::uint64_t(q[std::size_t(faceCorners[f][(e + 1) % 3])]);
-            edgeCount[(std::min(u, w) << 32) | std::max(u, w)] += 1;
-          }
-        }
-      }
-      std::vector<std::uint64_t> nonManifold;
-      for (const auto& [key, count] : edgeCount) {
-        if (count > 2) nonManifold.push_back(key);
-      }
-      std::sort(nonManifold.begin(), nonManifold.end()); // a fixed order: the repairs depend on it
+      const std::vector<std::uint64_t> nonManifold = nonManifoldEdgesOf(region, repair);
       remaining += nonManifold.size();
       for (std::uint64_t key : nonManifold) {
-        const int a = int(key >> 32), b = int(key & 0xffffffffu);
-        std::vector<int> ring;
-        std::map<int, int> count;
-        for (int r = start[std::size_t(a)]; r < start[std::size_t(a) + 1]; ++r) {
-          const int t = around[std::size_t(r)];
-          if (!holds(t, b)) continue;
-          ring.push_back(t);
-          if (inRegion(t)) count[tissueOf[std::size_t(t)]] += 1;
-        }
-        int fill = region;
-        if (region == -2) { // the most common tissue around the edge
-          int best = 0;
-          for (const auto& [l, c] : count) {
-            if (c > best) {
-              best = c;
-              fill = l;
-            }
-          }
-        }
-        for (int t : ring) {
-          // A tetrahedron changes tissue once: two tissues must not trade it back and forth.
-          if (!inRegion(t) && !joined[std::size_t(t)]) {
-            tissueOf[std::size_t(t)] = fill;
-            joined[std::size_t(t)] = 1;
-            ++repaired;
-            changed = true;
-          }
-        }
+        const std::size_t joinedNow = joinAroundEdge(key, region, repair);
+        repaired += joinedNow;
+        changed = changed || joinedNow > 0;
       }
     }
     if (!changed) break;
@@ -352,28 +422,30 @@ std::size_t repairNonManifoldEdges(const KuhnLattice& lattice, std::vector<int>&
   return repaired;
 }
 
-/// The (graded) Kuhn lattice of the chosen tissues' index box [lo, hi], labelled, repaired and
-/// snapped.
-TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
-                                  const long lo[3], const long hi[3], Warnings& warnings)
+/// The fine lattice in continuous index space: steps of h / spacing voxels, covering the index
+/// box [lo, hi] with a margin.
+FineLattice fineLatticeOver(const LabelImage& image, const MeshingParameters& parameters, const long lo[3], const long hi[3])
 {
-  const auto size = image.GetLargestPossibleRegion().GetSize();
-  const LabelPixel* voxels = image.GetBufferPointer();
-  // Fine lattice in continuous index space: steps of h / spacing voxels, covering the box with a
-  // margin.
-  double step[3], start[3];
-  std::array<int, 3> cells{};
+  FineLattice grid;
   for (int d = 0; d < 3; ++d) {
-    step[d] = parameters.resolutionMm / image.GetSpacing()[unsigned(d)];
-    start[d] = double(lo[d]) - 0.5 - 0.5 * step[d];
-    cells[std::size_t(d)] = int(std::ceil((double(hi[d]) + 0.5 - start[d]) / step[d]));
+    grid.step[d] = parameters.resolutionMm / image.GetSpacing()[unsigned(d)];
+    grid.start[d] = double(lo[d]) - 0.5 - 0.5 * grid.step[d];
+    grid.cells[std::size_t(d)] = int(std::ceil((double(hi[d]) + 0.5 - grid.start[d]) / grid.step[d]));
   }
+  return grid;
+}
+
+/// The Kuhn lattice on the fine cells, graded when asked: a tetrahedron of a cube of edge s (mm) is
+/// bisected unless every point of it (within s of its centroid) is far enough from the features
+/// for that size: s <= h + rate * distance.
+KuhnLattice gradedLatticeOver(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
+                              const FineLattice& grid)
+{
   const bool graded = parameters.gradingRate > 0 && parameters.coarseningLevels > 0;
   std::vector<float> distance;
-  if (graded) distance = distanceToFeatures(image, parameters, chosen, start, step, cells);
+  if (graded) distance = distanceToFeatures(image, parameters, chosen, grid);
   const double h = parameters.resolutionMm;
-  // A tetrahedron of a cube of edge s (mm) is bisected unless every point of it (within s of its
-  // centroid) is far enough from the features for that size: s <= h + rate * distance.
+  const auto& cells = grid.cells;
   auto wantsFiner = [&](const std::array<double, 3>& centroid, double cubeEdge) {
     std::size_t index = 0, stride = 1;
     for (int d = 0; d < 3; ++d) {
@@ -385,9 +457,15 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
     const double clearance = std::max(0.0, double(distance[index]) - s);
     return s > h + parameters.gradingRate * clearance + 1e-9;
   };
-  const KuhnLattice lattice = buildGradedKuhnLattice(cells, graded ? parameters.coarseningLevels : 0, wantsFiner);
-  throwIfCancelled(parameters.cancel, "meshing");
+  return buildGradedKuhnLattice(cells, graded ? parameters.coarseningLevels : 0, wantsFiner);
+}
 
+/// Every lattice tetrahedron's tissue (-1: not meshed), by the voxel at its centroid.
+std::vector<int> tissuesByCentroid(const LabelImage& image, const std::set<int>& chosen, const KuhnLattice& lattice,
+                                   const FineLattice& grid)
+{
+  const auto size = image.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* voxels = image.GetBufferPointer();
   auto tissueAt = [&](const double c[3]) -> int {
     long idx[3];
     for (int d = 0; d < 3; ++d) {
@@ -396,24 +474,23 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
     }
     return voxels[std::size_t(idx[0]) + size[0] * (std::size_t(idx[1]) + size[1] * std::size_t(idx[2]))];
   };
-  // Every lattice tetrahedron's tissue (-1: not meshed), by its centroid.
   std::vector<int> tissueOf(lattice.tetrahedra.size(), -1);
   for (std::size_t t = 0; t < lattice.tetrahedra.size(); ++t) {
     double centroid[3] = {0, 0, 0};
     for (int v : lattice.tetrahedra[t]) {
-      for (int d = 0; d < 3; ++d) centroid[d] += (start[d] + double(lattice.nodes[std::size_t(v)][std::size_t(d)]) * step[d]) / 4.0;
+      for (int d = 0; d < 3; ++d) centroid[d] += (grid.start[d] + double(lattice.nodes[std::size_t(v)][std::size_t(d)]) * grid.step[d]) / 4.0;
     }
     const int tissue = tissueAt(centroid);
     if (chosen.count(tissue)) tissueOf[t] = tissue;
   }
-  throwIfCancelled(parameters.cancel, "meshing");
-  const std::size_t repaired = repairNonManifoldEdges(lattice, tissueOf, chosen, warnings);
-  throwIfCancelled(parameters.cancel, "meshing");
-  if (repaired > 0) {
-    warnings.push_back("mesh: " + std::to_string(repaired) +
-                       " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
-  }
+  return tissueOf;
+}
 
+/// The meshed tetrahedra with their nodes (physical points, numbered in order of first use),
+/// each positively oriented.
+TetrahedralMeshArrays meshedTetrahedra(const LabelImage& image, const KuhnLattice& lattice, const std::vector<int>& tissueOf,
+                                       const FineLattice& grid)
+{
   TetrahedralMeshArrays arrays;
   std::vector<long long> newIndex(lattice.nodes.size(), -1);
   for (std::size_t t = 0; t < lattice.tetrahedra.size(); ++t) {
@@ -427,7 +504,7 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
       if (id < 0) {
         id = (long long)arrays.points.size();
         itk::ContinuousIndex<double, 3> c;
-        for (int d = 0; d < 3; ++d) c[unsigned(d)] = start[d] + double(lattice.nodes[std::size_t(node)][std::size_t(d)]) * step[d];
+        for (int d = 0; d < 3; ++d) c[unsigned(d)] = grid.start[d] + double(lattice.nodes[std::size_t(node)][std::size_t(d)]) * grid.step[d];
         PhysicalPoint x;
         image.TransformContinuousIndexToPhysicalPoint(c, x);
         arrays.points.push_back({x[0], x[1], x[2]});
@@ -439,16 +516,40 @@ TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParamete
     arrays.tetrahedra.push_back(ids);
     arrays.labels.push_back(tissue);
   }
-  if (parameters.snapToBoundaries) {
-    SnappingParameters snapping;
-    snapping.minimumDihedralDegrees = parameters.minimumDihedralDegrees;
-    const std::vector<int> tissues(chosen.begin(), chosen.end());
-    const SnappingSummary s = snapInterfaceNodes(arrays, image, tissues, snapping);
-    if (s.nodesPartlyMoved > s.interfaceNodes / 10) {
-      warnings.push_back("mesh: " + std::to_string(s.nodesPartlyMoved) + " of " + std::to_string(s.interfaceNodes) +
-                         " interface nodes stopped short of the tissue boundary to keep the elements' quality");
-    }
+  return arrays;
+}
+
+void snapOntoTissueBoundaries(TetrahedralMeshArrays& arrays, const LabelImage& image, const MeshingParameters& parameters,
+                              const std::set<int>& chosen, Warnings& warnings)
+{
+  SnappingParameters snapping;
+  snapping.minimumDihedralDegrees = parameters.minimumDihedralDegrees;
+  const std::vector<int> tissues(chosen.begin(), chosen.end());
+  const SnappingSummary s = snapInterfaceNodes(arrays, image, tissues, snapping);
+  if (s.nodesPartlyMoved > s.interfaceNodes / 10) {
+    warnings.push_back("mesh: " + std::to_string(s.nodesPartlyMoved) + " of " + std::to_string(s.interfaceNodes) +
+                       " interface nodes stopped short of the tissue boundary to keep the elements' quality");
   }
+}
+
+/// The (graded) Kuhn lattice of the chosen tissues' index box [lo, hi], labelled, repaired and
+/// snapped.
+TetrahedralMeshArrays latticeMesh(const LabelImage& image, const MeshingParameters& parameters, const std::set<int>& chosen,
+                                  const long lo[3], const long hi[3], Warnings& warnings)
+{
+  const FineLattice grid = fineLatticeOver(image, parameters, lo, hi);
+  const KuhnLattice lattice = gradedLatticeOver(image, parameters, chosen, grid);
+  throwIfCancelled(parameters.cancel, "meshing");
+  std::vector<int> tissueOf = tissuesByCentroid(image, chosen, lattice, grid);
+  throwIfCancelled(parameters.cancel, "meshing");
+  const std::size_t repaired = repairNonManifoldEdges(lattice, tissueOf, chosen, warnings);
+  throwIfCancelled(parameters.cancel, "meshing");
+  if (repaired > 0) {
+    warnings.push_back("mesh: " + std::to_string(repaired) +
+                       " lattice tetrahedra joined their neighbours' tissue to keep every surface manifold");
+  }
+  TetrahedralMeshArrays arrays = meshedTetrahedra(image, lattice, tissueOf, grid);
+  if (parameters.snapToBoundaries) snapOntoTissueBoundaries(arrays, image, parameters, chosen, warnings);
   return arrays;
 }
 /// Keeps the largest face-connected part of the mesh. Parts that are detached (a fragment of the

@@ -415,14 +415,11 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
 }
 
 namespace {
-RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
-                                                 const RigidRegistrationParameters& parameters)
+/// The preoperative side: as prepared by the caller (checked to be from these images and
+/// settings), else prepared here.
+std::shared_ptr<const PreparedRigidMoving> preparedMovingFor(const ScalarImage& preop, const LabelImage* preopLabels,
+                                                             const RigidRegistrationParameters& parameters)
 {
-  parameters.validate();
-  RigidRegistrationResult result;
-  const std::size_t levels = parameters.levelSpacingMm.size();
-
-  // The pyramid, coarsest first; the preoperative side as prepared.
   std::shared_ptr<const PreparedRigidMoving> prepared = parameters.preparedMoving;
   if (!prepared) {
     prepared = prepareRigidMoving(preop, preopLabels, parameters);
@@ -430,36 +427,61 @@ RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, con
              prepared->maskDilationMm != parameters.maskDilationMm) {
     throw std::invalid_argument("rigid registration: the preoperative side was prepared from other images or settings");
   }
-  requireRegistrableImage(intraop, "intraoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
-  std::vector<ScalarImage::Pointer> fixedLevels;
-  for (double spacing : parameters.levelSpacingMm) fixedLevels.push_back(shrinkTo(intraop, spacing));
-  const std::vector<ScalarImage::Pointer>& movingLevels = prepared->levels;
-  const double fixedThreshold = foregroundThreshold(*fixedLevels.front());
-  requireForegroundExtent(*fixedLevels.front(), fixedThreshold, "intraoperative", parameters.levelSpacingMm.front(),
-                          parameters.minimumVoxelsPerAxis);
-  for (const ScalarImage::Pointer& level : fixedLevels) requireVariedForeground(*level, fixedThreshold, "intraoperative");
-  const double movingThreshold = prepared->threshold;
-  const MaskObject::Pointer mask = prepared->mask;
+  return prepared;
+}
 
-  // Start: the fixed foreground centroid maps to the moving foreground centroid, measured over
-  // the part of the preoperative head that the intraoperative field of view covers.
-  const ScalarImage& coarseFixed = *fixedLevels.front();
-  const PhysicalPoint fixedCentre = centroidOfForeground(coarseFixed, fixedThreshold, nullptr);
-  if (!std::isfinite(fixedCentre[0])) {
+/// The intraoperative pyramid, coarsest first, and its foreground threshold; refuses an image too
+/// small, with too little foreground or a flat one.
+struct FixedPyramid {
+  std::vector<ScalarImage::Pointer> levels;
+  double threshold = 0;
+};
+
+FixedPyramid fixedPyramidOf(const ScalarImage& intraop, const RigidRegistrationParameters& parameters)
+{
+  requireRegistrableImage(intraop, "intraoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
+  FixedPyramid pyramid;
+  for (double spacing : parameters.levelSpacingMm) pyramid.levels.push_back(shrinkTo(intraop, spacing));
+  pyramid.threshold = foregroundThreshold(*pyramid.levels.front());
+  requireForegroundExtent(*pyramid.levels.front(), pyramid.threshold, "intraoperative", parameters.levelSpacingMm.front(),
+                          parameters.minimumVoxelsPerAxis);
+  for (const ScalarImage::Pointer& level : pyramid.levels) requireVariedForeground(*level, pyramid.threshold, "intraoperative");
+  return pyramid;
+}
+
+/// The foreground centroids the start maps onto each other: the fixed one, and the moving one
+/// measured over the part of the preoperative head that the intraoperative field of view covers.
+struct ForegroundCentres {
+  PhysicalPoint fixed, moving;
+};
+
+ForegroundCentres foregroundCentres(const FixedPyramid& fixed, const PreparedRigidMoving& moving)
+{
+  const ScalarImage& coarseFixed = *fixed.levels.front();
+  ForegroundCentres centres;
+  centres.fixed = centroidOfForeground(coarseFixed, fixed.threshold, nullptr);
+  if (!std::isfinite(centres.fixed[0])) {
     throw InputError("the intraoperative image has no foreground to register");
   }
-  PhysicalPoint movingCentre = centroidOfForeground(*movingLevels.front(), movingThreshold, nullptr);
-  if (!std::isfinite(movingCentre[0])) throw InputError("the preoperative image has no foreground to register");
+  centres.moving = centroidOfForeground(*moving.levels.front(), moving.threshold, nullptr);
+  if (!std::isfinite(centres.moving[0])) throw InputError("the preoperative image has no foreground to register");
   for (int pass = 0; pass < 3; ++pass) {
-    const itk::Vector<double, 3> shift = movingCentre - fixedCentre;
-    const PhysicalPoint refined = centroidOfForeground(*movingLevels.front(), movingThreshold, [&](const PhysicalPoint& x) {
+    const itk::Vector<double, 3> shift = centres.moving - centres.fixed;
+    const PhysicalPoint refined = centroidOfForeground(*moving.levels.front(), moving.threshold, [&](const PhysicalPoint& x) {
       itk::ContinuousIndex<double, 3> index;
       return coarseFixed.TransformPhysicalPointToContinuousIndex(x - shift, index);
     });
     if (!std::isfinite(refined[0])) break;
-    movingCentre = refined;
+    centres.moving = refined;
   }
+  return centres;
+}
 
+/// The starting transform about the fixed centre: the caller's initial transform, else the
+/// translation between the centroids.
+Transform::Pointer startingTransform(const ForegroundCentres& centres, const RigidRegistrationParameters& parameters)
+{
+  const PhysicalPoint& fixedCentre = centres.fixed;
   auto transform = Transform::New();
   transform->SetCenter(fixedCentre);
   if (parameters.initialIntraopToPreop) {
@@ -478,77 +500,99 @@ RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, con
     }
     transform->SetTranslation(translation);
   } else {
-    transform->SetTranslation(movingCentre - fixedCentre);
+    transform->SetTranslation(centres.moving - centres.fixed);
   }
+  return transform;
+}
 
+struct ScoredStart {
+  double value;
+  std::array<double, 3> angles;
+};
+
+/// Every start rotation (the grid of start angles about the translation found) scored by the
+/// metric, best first; those where fewer than a quarter of the samples land are left out.
+std::vector<ScoredStart> scoredStarts(LevelMetric& metric, Transform& transform, const Transform::ParametersType& translationOnly,
+                                      const RigidRegistrationParameters& parameters)
+{
+  std::vector<ScoredStart> starts;
+  for (double a : parameters.startAnglesDegrees) {
+    for (double b : parameters.startAnglesDegrees) {
+      throwIfCancelled(parameters.cancel, "rigid registration");
+      for (double c : parameters.startAnglesDegrees) {
+        transform.SetParameters(translationOnly);
+        setRotationFromEuler(transform, a, b, c);
+        const double value = metric.metric->GetValue();
+        if (metric.metric->GetNumberOfValidPoints() < metric.points->GetNumberOfPoints() / 4) continue;
+        starts.push_back({value, {a, b, c}});
+      }
+    }
+  }
+  if (starts.empty()) {
+    throw MethodError("rigid registration: no start overlaps the preoperative image; the images do not show the same anatomy");
+  }
+  std::sort(starts.begin(), starts.end(), [](const ScoredStart& x, const ScoredStart& y) { return x.value < y.value; });
+  return starts;
+}
+
+/// The coarsest level without an initial transform: scores every start, optimizes the best few and
+/// keeps the best end (left in `transform`); returns its iterations.
+unsigned optimizeFromBestStarts(LevelMetric& metric, Transform& transform, const RigidRegistrationParameters& parameters,
+                                RigidRegistrationResult& result)
+{
+  const Transform::ParametersType translationOnly = transform.GetParameters();
+  const std::vector<ScoredStart> starts = scoredStarts(metric, transform, translationOnly, parameters);
+  result.startsScored = unsigned(starts.size());
+  double bestValue = std::numeric_limits<double>::max();
+  Transform::ParametersType best;
+  unsigned bestIterations = 0;
+  for (std::size_t s = 0; s < std::min<std::size_t>(parameters.startsOptimized, starts.size()); ++s) {
+    transform.SetParameters(translationOnly);
+    setRotationFromEuler(transform, starts[s].angles[0], starts[s].angles[1], starts[s].angles[2]);
+    const unsigned iterations = optimize(metric.metric, parameters.stepMmPerLevel[0], parameters.minimumStepMmPerLevel[0],
+                                         parameters.iterationsPerLevel[0], parameters.cancel);
+    const double value = metric.metric->GetValue();
+    if (value < bestValue) {
+      bestValue = value;
+      best = transform.GetParameters();
+      bestIterations = iterations;
+      result.winningStartDegrees = starts[s].angles;
+    }
+  }
+  transform.SetParameters(best);
+  return bestIterations;
+}
+
+/// Each level of the pyramid, coarsest first, optimizes `transform` further; the finest level's
+/// metric, valid samples, normalized mutual information and overlap go into `result`.
+void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& moving, Transform* transform,
+                         const RigidRegistrationParameters& parameters, RigidRegistrationResult& result)
+{
+  const std::size_t levels = parameters.levelSpacingMm.size();
   for (std::size_t level = 0; level < levels; ++level) {
     throwIfCancelled(parameters.cancel, "rigid registration");
-    PointSet::Pointer points = sampleForeground(*fixedLevels[level], fixedThreshold, parameters.samplesPerLevel[level],
+    PointSet::Pointer points = sampleForeground(*fixed.levels[level], fixed.threshold, parameters.samplesPerLevel[level],
                                                 parameters.seed + level);
-    LevelMetric metric = makeMetric(fixedLevels[level], movingLevels[level], points, mask, transform, parameters.histogramBins);
-
+    LevelMetric metric = makeMetric(fixed.levels[level], moving.levels[level], points, moving.mask, transform, parameters.histogramBins);
     if (level == 0 && !parameters.initialIntraopToPreop) {
-      // Multi-start: score every start, optimize the best few, keep the best end.
-      const Transform::ParametersType translationOnly = transform->GetParameters();
-      struct Start {
-        double value;
-        std::array<double, 3> angles;
-      };
-      std::vector<Start> starts;
-      for (double a : parameters.startAnglesDegrees) {
-        for (double b : parameters.startAnglesDegrees) {
-          throwIfCancelled(parameters.cancel, "rigid registration");
-          for (double c : parameters.startAnglesDegrees) {
-            transform->SetParameters(translationOnly);
-            setRotationFromEuler(*transform, a, b, c);
-            const double value = metric.metric->GetValue();
-            if (metric.metric->GetNumberOfValidPoints() < points->GetNumberOfPoints() / 4) continue;
-            starts.push_back({value, {a, b, c}});
-          }
-        }
-      }
-      result.startsScored = unsigned(starts.size());
-      if (starts.empty()) {
-        throw MethodError("rigid registration: no start overlaps the preoperative image; the images do not show the same anatomy");
-      }
-      std::sort(starts.begin(), starts.end(), [](const Start& x, const Start& y) { return x.value < y.value; });
-      double bestValue = std::numeric_limits<double>::max();
-      Transform::ParametersType best;
-      unsigned bestIterations = 0;
-      for (std::size_t s = 0; s < std::min<std::size_t>(parameters.startsOptimized, starts.size()); ++s) {
-        transform->SetParameters(translationOnly);
-        setRotationFromEuler(*transform, starts[s].angles[0], starts[s].angles[1], starts[s].angles[2]);
-        const unsigned iterations = optimize(metric.metric, parameters.stepMmPerLevel[0], parameters.minimumStepMmPerLevel[0],
-                                             parameters.iterationsPerLevel[0], parameters.cancel);
-        const double value = metric.metric->GetValue();
-        if (value < bestValue) {
-          bestValue = value;
-          best = transform->GetParameters();
-          bestIterations = iterations;
-          result.winningStartDegrees = starts[s].angles;
-        }
-      }
-      transform->SetParameters(best);
-      result.iterationsPerLevel.push_back(bestIterations);
+      result.iterationsPerLevel.push_back(optimizeFromBestStarts(metric, *transform, parameters, result));
     } else {
       result.iterationsPerLevel.push_back(optimize(metric.metric, parameters.stepMmPerLevel[level],
                                                    parameters.minimumStepMmPerLevel[level],
                                                    parameters.iterationsPerLevel[level], parameters.cancel));
     }
-
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
       result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
-      result.normalizedMutualInformation = normalizedMutualInformation(
-        *fixedLevels[level], *movingLevels[level], *points, *transform, mask, parameters.histogramBins, result.overlap);
+      result.normalizedMutualInformation = normalizedMutualInformation(*fixed.levels[level], *moving.levels[level], *points,
+                                                                       *transform, moving.mask, parameters.histogramBins, result.overlap);
     }
   }
+}
 
-  result.intraopToPreop = transform.GetPointer();
-  result.rotationDegrees = rotationAngleDegrees(transform->GetMatrix());
-  result.translationMm = (transform->TransformPoint(fixedCentre) - fixedCentre).GetNorm();
-
-  // Can the result be trusted?
+/// Can the result be trusted? The reason it cannot (empty when it can).
+std::string untrustworthyBecause(const RigidRegistrationResult& result, const RigidRegistrationParameters& parameters)
+{
   std::ostringstream why;
   if (result.validSamples < parameters.minimumValidSamples) {
     why << "only " << result.validSamples << " samples of the intraoperative foreground land on the preoperative image; "
@@ -561,25 +605,47 @@ RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, con
   } else if (result.rotationDegrees > parameters.maximumRotationDegrees) {
     why << "a rotation of " << result.rotationDegrees << " degrees is implausible for a head in the scanner";
   }
-  result.failureReason = why.str();
-  result.trustworthy = result.failureReason.empty();
-  if (result.trustworthy) {
+  return why.str();
+}
+
+/// Warnings on a trusted result whose overlap, mutual information or rotation is near the limits.
+void warnAboutDoubtfulAlignment(RigidRegistrationResult& result, const RigidRegistrationParameters& parameters)
+{
+  if (result.overlap < parameters.warningOverlap) {
     std::ostringstream w;
-    if (result.overlap < parameters.warningOverlap) {
-      w << "rigid: only " << int(100 * result.overlap) << " % of the intraoperative foreground overlaps the preoperative head";
-      result.warnings.push_back(w.str());
-    }
-    if (result.normalizedMutualInformation < parameters.warningNormalizedMutualInformation) {
-      std::ostringstream m;
-      m << "rigid: normalized mutual information is low (" << result.normalizedMutualInformation << "); check the alignment";
-      result.warnings.push_back(m.str());
-    }
-    if (result.rotationDegrees > parameters.warningRotationDegrees) {
-      std::ostringstream r;
-      r << "rigid: a large rotation (" << result.rotationDegrees << " degrees); check the alignment";
-      result.warnings.push_back(r.str());
-    }
+    w << "rigid: only " << int(100 * result.overlap) << " % of the intraoperative foreground overlaps the preoperative head";
+    result.warnings.push_back(w.str());
   }
+  if (result.normalizedMutualInformation < parameters.warningNormalizedMutualInformation) {
+    std::ostringstream m;
+    m << "rigid: normalized mutual information is low (" << result.normalizedMutualInformation << "); check the alignment";
+    result.warnings.push_back(m.str());
+  }
+  if (result.rotationDegrees > parameters.warningRotationDegrees) {
+    std::ostringstream r;
+    r << "rigid: a large rotation (" << result.rotationDegrees << " degrees); check the alignment";
+    result.warnings.push_back(r.str());
+  }
+}
+
+RigidRegistrationResult registerRigidlyUnguarded(const ScalarImage& intraop, const ScalarImage& preop, const LabelImage* preopLabels,
+                                                 const RigidRegistrationParameters& parameters)
+{
+  parameters.validate();
+  RigidRegistrationResult result;
+  // The pyramids, coarsest first; the preoperative side as prepared.
+  const std::shared_ptr<const PreparedRigidMoving> moving = preparedMovingFor(preop, preopLabels, parameters);
+  const FixedPyramid fixed = fixedPyramidOf(intraop, parameters);
+  const ForegroundCentres centres = foregroundCentres(fixed, *moving);
+  const Transform::Pointer transform = startingTransform(centres, parameters);
+  optimizeOverPyramid(fixed, *moving, transform, parameters, result);
+
+  result.intraopToPreop = transform.GetPointer();
+  result.rotationDegrees = rotationAngleDegrees(transform->GetMatrix());
+  result.translationMm = (transform->TransformPoint(centres.fixed) - centres.fixed).GetNorm();
+  result.failureReason = untrustworthyBecause(result, parameters);
+  result.trustworthy = result.failureReason.empty();
+  if (result.trustworthy) warnAboutDoubtfulAlignment(result, parameters);
   return result;
 }
 } // namespace

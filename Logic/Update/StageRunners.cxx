@@ -954,62 +954,55 @@ void reportTrust(RunContext& context, const NonrigidUpdateTrustAssessment& trust
     throw MethodError(message);
   }
 }
-} // namespace
+/// What the warp reads of the earlier stages' files: the mesh with its displacements and the rigid transform.
+struct WarpInputs {
+  fs::path meshFile;
+  vtkSmartPointer<vtkUnstructuredGrid> mesh;
+  SpatialTransform::Pointer rigid;
+};
 
-void runWarpStage(RunContext& context)
+WarpInputs readWarpInputs(RunContext& context)
 {
-  Stopwatch clock;
-  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm"),
-                 surfaceFile = context.output("brain_surface.vtp");
-  for (const auto& [needed, stage] : {std::pair<fs::path, const char*>{rigidFile, "rigid"}, {meshFile, "mesh"}, {surfaceFile, "surface"}}) {
+  WarpInputs inputs;
+  inputs.meshFile = context.output("mesh.vtu");
+  const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm"), surfaceFile = context.output("brain_surface.vtp");
+  for (const auto& [needed, stage] :
+       {std::pair<fs::path, const char*>{rigidFile, "rigid"}, {inputs.meshFile, "mesh"}, {surfaceFile, "surface"}}) {
     std::error_code ec;
     if (!fs::exists(needed, ec)) {
       throw InputError(needed.string() + ": not found; run `brainshift " + stage + "` on this output folder first");
     }
   }
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
-  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
-  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
-  const ScalarImage& intraop = context.intraopImage("warp");
-  const ScalarImage& preopImage = context.preopImage("warp");
-  const LabelImage& preopLabels = context.preopLabels("warp");
-  context.overlays();
-  const double readSeconds = clock.seconds();
+  inputs.mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(inputs.meshFile));
+  if (!inputs.mesh) throw InputError(inputs.meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  inputs.rigid = readTransform(rigidFile);
+  if (!isLinearTransform(inputs.rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  return inputs;
+}
 
-  Stopwatch fieldClock;
-  const DeformationField deformation =
-    intraopToPreopField(mesh, *rigid, ImageGeometry::of(&intraop), DeformationFieldParameters{}, meshFile.string());
-  RigidAlternative rigidOnly{linearTransformField(*rigid, ImageGeometry::of(&intraop)), nullptr, nullptr};
-  const double fieldSeconds = fieldClock.seconds();
-  Stopwatch warpClock;
-  ScalarImage::Pointer warpedImage = warpScalarVolume(preopImage, *deformation.field);
-  LabelImage::Pointer warpedLabels = warpLabelVolume(preopLabels, *deformation.field);
-  rigidOnly.image = warpScalarVolume(preopImage, *rigidOnly.field);
-  rigidOnly.labels = warpLabelVolume(preopLabels, *rigidOnly.field);
-  const double warpSeconds = warpClock.seconds();
-
-  // Never a deformed image worse than the rigid one without a word: a rejected update gives way
-  // to the rigid result in every file, and the command fails with the reason once they are written.
-  Stopwatch trustClock;
-  const NonrigidUpdateTrustAssessment trust = assessUpdate(context, intraop, deformation, *warpedImage, *warpedLabels, rigidOnly);
-  const double trustSeconds = trustClock.seconds();
-  const bool rigidFallback = trust.trust == UpdateTrust::Rejected;
-  // The confidence map describes the update: none when the rigid result stands in for it.
-  nlohmann::json uncertaintyEntry = nullptr;
+/// The confidence map describes the update: none (and an earlier run's removed) when the rigid
+/// result stands in for it.
+ScalarImage::Pointer updateUncertainty(RunContext& context, const WarpInputs& inputs, const DeformationField& deformation,
+                                       bool rigidFallback, nlohmann::json& entry)
+{
   const ScalarImage::Pointer uncertainty =
-    rigidFallback ? nullptr : uncertaintyOnScan(mesh, *deformation.field, meshFile.string(), uncertaintyEntry);
+    rigidFallback ? nullptr : uncertaintyOnScan(inputs.mesh, *deformation.field, inputs.meshFile.string(), entry);
   if (rigidFallback) {
     std::error_code ec;
     fs::remove(context.output("displacement_uncertainty_mm.nii.gz"), ec);
   }
-  Stopwatch writeClock;
-  writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
-                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback, uncertainty);
-  keepRejectedUpdate(context, deformation.field, *rigid, rigidFallback);
-  const double writeSeconds = writeClock.seconds();
+  return uncertainty;
+}
 
-  context.report().setStage("warp", {{"wall_seconds", clock.seconds()},
+struct WarpSeconds {
+  double read = 0, field = 0, warp = 0, trust = 0, write = 0;
+};
+
+/// The stage's figures into the report (and the trust verdict's), the folds as a warning, the line on the console.
+void reportWarpStage(RunContext& context, const DeformationField& deformation, bool rigidFallback, double wallSeconds,
+                     const WarpSeconds& seconds, const nlohmann::json& uncertaintyEntry, const NonrigidUpdateTrustAssessment& trust)
+{
+  context.report().setStage("warp", {{"wall_seconds", wallSeconds},
                                      {"voxels", deformation.voxels},
                                      {"mesh_voxels", deformation.meshVoxels},
                                      {"folded_voxels", deformation.foldedVoxels},
@@ -1019,23 +1012,64 @@ void runWarpStage(RunContext& context)
                                      {"fallback_sigma_mm", deformation.fallbackSigmaMm},
                                      {"volumes_warped", 2 + context.overlays().size()},
                                      {"rigid_fallback", rigidFallback},
-                                     {"read_seconds", readSeconds},
-                                     {"field_seconds", fieldSeconds},
+                                     {"read_seconds", seconds.read},
+                                     {"field_seconds", seconds.field},
                                      {"locate_seconds", deformation.locateSeconds},
                                      {"fallback_seconds", deformation.fallbackSeconds},
                                      {"jacobian_seconds", deformation.jacobianSeconds},
-                                     {"warp_seconds", warpSeconds},
-                                     {"trust_seconds", trustSeconds},
-                                     {"write_seconds", writeSeconds},
+                                     {"warp_seconds", seconds.warp},
+                                     {"trust_seconds", seconds.trust},
+                                     {"write_seconds", seconds.write},
                                      {"uncertainty", uncertaintyEntry}});
-  context.report().set("trust", trustEntry(trust, trustSeconds));
+  context.report().set("trust", trustEntry(trust, seconds.trust));
   if (deformation.foldedVoxels > 0) {
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
                                   " voxels where the deformation folds (Jacobian determinant <= 0)"});
   }
   context.say("warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
-              deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, fieldSeconds, warpSeconds, trustSeconds,
-              writeSeconds);
+              deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, seconds.field, seconds.warp, seconds.trust,
+              seconds.write);
+}
+} // namespace
+
+void runWarpStage(RunContext& context)
+{
+  Stopwatch clock;
+  WarpSeconds seconds;
+  const WarpInputs inputs = readWarpInputs(context);
+  const SpatialTransform::Pointer& rigid = inputs.rigid;
+  const ScalarImage& intraop = context.intraopImage("warp");
+  const ScalarImage& preopImage = context.preopImage("warp");
+  const LabelImage& preopLabels = context.preopLabels("warp");
+  context.overlays();
+  seconds.read = clock.seconds();
+
+  Stopwatch fieldClock;
+  const DeformationField deformation =
+    intraopToPreopField(inputs.mesh, *rigid, ImageGeometry::of(&intraop), DeformationFieldParameters{}, inputs.meshFile.string());
+  RigidAlternative rigidOnly{linearTransformField(*rigid, ImageGeometry::of(&intraop)), nullptr, nullptr};
+  seconds.field = fieldClock.seconds();
+  Stopwatch warpClock;
+  ScalarImage::Pointer warpedImage = warpScalarVolume(preopImage, *deformation.field);
+  LabelImage::Pointer warpedLabels = warpLabelVolume(preopLabels, *deformation.field);
+  rigidOnly.image = warpScalarVolume(preopImage, *rigidOnly.field);
+  rigidOnly.labels = warpLabelVolume(preopLabels, *rigidOnly.field);
+  seconds.warp = warpClock.seconds();
+
+  // Never a deformed image worse than the rigid one without a word: a rejected update gives way
+  // to the rigid result in every file, and the command fails with the reason once they are written.
+  Stopwatch trustClock;
+  const NonrigidUpdateTrustAssessment trust = assessUpdate(context, intraop, deformation, *warpedImage, *warpedLabels, rigidOnly);
+  seconds.trust = trustClock.seconds();
+  const bool rigidFallback = trust.trust == UpdateTrust::Rejected;
+  nlohmann::json uncertaintyEntry = nullptr;
+  const ScalarImage::Pointer uncertainty = updateUncertainty(context, inputs, deformation, rigidFallback, uncertaintyEntry);
+  Stopwatch writeClock;
+  writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
+                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback, uncertainty);
+  keepRejectedUpdate(context, deformation.field, *rigid, rigidFallback);
+  seconds.write = writeClock.seconds();
+  reportWarpStage(context, deformation, rigidFallback, clock.seconds(), seconds, uncertaintyEntry, trust);
   reportTrust(context, trust);
 }
 

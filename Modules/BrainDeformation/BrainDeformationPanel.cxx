@@ -12,6 +12,8 @@
 #include <QTimer>
 #include <QVBoxLayout>
 
+#include <functional>
+
 namespace brainshift {
 
 BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
@@ -95,6 +97,93 @@ void BrainDeformationPanel::showStage(const QString& stage, double fraction)
   }
 }
 
+namespace {
+/// The worker's own copies and references (BackgroundRun.h): the mesh is copied, since the
+/// displacements are attached to it; images and the transform are only read.
+struct DeformationInputs {
+  vtkSmartPointer<vtkUnstructuredGrid> mesh;
+  LabelImage::ConstPointer preop, intraopSegmentation;
+  ScalarImage::ConstPointer image;
+  SpatialTransform::ConstPointer rigid;
+  std::string meshId, rigidId;
+  int ranks = 1;
+  std::filesystem::path worker;
+};
+
+using StageReport = std::function<void(const std::string&, double)>;
+
+/// What the run delivers to the scene and the status line.
+struct DeformationOutcome {
+  vtkSmartPointer<vtkPolyData> brainSurface;
+  std::size_t imposed = 0;
+  double maximum = 0, residual = 0;
+  FiniteElementResult solved;
+  double seconds = 0;
+};
+
+/// On the worker thread: the active surface, then the finite element solve; the displacements
+/// are attached to the copied mesh.
+DeformationOutcome deformAndSolve(const DeformationInputs& in, CancelFlag cancel, const StageReport& report)
+{
+  QElapsedTimer clock;
+  clock.start();
+  report("surface", 0.0);
+  ActiveSurfaceParameters surfaceParameters;
+  surfaceParameters.cancel = cancel;
+  const ActiveSurfaceResult surface =
+    deformBrainSurface(in.mesh, in.preop.GetPointer(), *in.intraopSegmentation, in.image.GetPointer(), *in.rigid, surfaceParameters);
+  throwIfCancelled(cancel, "brain deformation");
+  const FiniteElementJob job = finiteElementJobFromModel(in.mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
+  FiniteElementRunOptions options;
+  options.ranks = in.ranks;
+  options.worker = in.worker;
+  options.cancel = cancel;
+  options.progress = report;
+  DeformationOutcome outcome;
+  outcome.solved = solveWithWorker(job, options);
+  attachDisplacements(in.mesh, outcome.solved);
+  outcome.seconds = clock.elapsed() / 1000.0;
+  outcome.brainSurface = surface.surface;
+  outcome.imposed = surface.imposedNodes;
+  outcome.maximum = surface.maxDisplacementMm;
+  outcome.residual = surface.meanResidualMm;
+  return outcome;
+}
+
+/// The deformed brain surface into the scene: the node of that name takes it, else a new node
+/// coloured by the displacement, under the rigid transform when the scene still holds it.
+void placeBrainSurface(Scene& scene, const std::string& name, const vtkSmartPointer<vtkPolyData>& brainSurface, const std::string& rigidId)
+{
+  auto surfaceNode = scene.findByName<ModelNode>(name);
+  if (surfaceNode) {
+    surfaceNode->setMesh(brainSurface);
+    return;
+  }
+  surfaceNode = ModelNode::create(name, brainSurface);
+  ModelDisplay display;
+  display.scalarVisibility = true;
+  display.activeScalarName = "DisplacementMagnitude";
+  surfaceNode->setDisplay(display);
+  surfaceNode->setRole("preop");
+  if (scene.node(rigidId)) surfaceNode->setParentTransformId(rigidId);
+  scene.add(surfaceNode);
+}
+
+QString doneMessage(const DeformationOutcome& o)
+{
+  return BrainDeformationPanel::tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
+                                   "rank(s), %7 iterations, residual %8.")
+    .arg(o.seconds, 0, 'f', 1)
+    .arg(o.imposed)
+    .arg(o.maximum, 0, 'f', 1)
+    .arg(o.residual, 0, 'f', 2)
+    .arg(o.solved.equations)
+    .arg(o.solved.ranks)
+    .arg(o.solved.iterations)
+    .arg(o.solved.relativeResidual, 0, 'e', 1);
+}
+} // namespace
+
 void BrainDeformationPanel::run()
 {
   if (isRunning()) return;
@@ -109,71 +198,31 @@ void BrainDeformationPanel::run()
     controls_->setStatus(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
     return;
   }
-  // The worker's own copies and references (BackgroundRun.h): the mesh is copied, since the
-  // displacements are attached to it; images and the transform are only read.
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
-  mesh->DeepCopy(meshData);
-  LabelImage::ConstPointer preop = preopLabels->image(), intraopSegmentation = intraopLabels->image();
-  ScalarImage::ConstPointer image = intraop->image();
-  SpatialTransform::ConstPointer rigid = transform->transformFromParent();
-  const std::string meshId = meshNode->id(), rigidId = transform->id();
-  const int ranks = ranks_->value();
-  const std::filesystem::path worker = worker_.empty() ? workerBesideExecutable() : worker_;
+  DeformationInputs inputs;
+  inputs.mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  inputs.mesh->DeepCopy(meshData);
+  inputs.preop = preopLabels->image();
+  inputs.intraopSegmentation = intraopLabels->image();
+  inputs.image = intraop->image();
+  inputs.rigid = transform->transformFromParent();
+  inputs.meshId = meshNode->id();
+  inputs.rigidId = transform->id();
+  inputs.ranks = ranks_->value();
+  inputs.worker = worker_.empty() ? workerBesideExecutable() : worker_;
   auto board = std::make_shared<ProgressBoard>();
   board_ = board;
-  auto report = [board](const std::string& stage, double fraction) {
+  const StageReport report = [board](const std::string& stage, double fraction) {
     std::lock_guard<std::mutex> lock(board->mutex);
     board->stage = stage;
     board->fraction = fraction;
   };
   lastStage_.clear();
-  controls_->start(tr("Matching the brain surface ..."), [this, mesh, preop, intraopSegmentation, image, rigid, meshId, rigidId, ranks,
-                worker, report](CancelFlag cancel) -> BackgroundRun::Delivery {
-    QElapsedTimer clock;
-    clock.start();
-    report("surface", 0.0);
-    ActiveSurfaceParameters surfaceParameters;
-    surfaceParameters.cancel = cancel;
-    const ActiveSurfaceResult surface =
-      deformBrainSurface(mesh, preop.GetPointer(), *intraopSegmentation, image.GetPointer(), *rigid, surfaceParameters);
-    throwIfCancelled(cancel, "brain deformation");
-    const FiniteElementJob job = finiteElementJobFromModel(mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
-    FiniteElementRunOptions options;
-    options.ranks = ranks;
-    options.worker = worker;
-    options.cancel = cancel;
-    options.progress = report;
-    const FiniteElementResult solved = solveWithWorker(job, options);
-    attachDisplacements(mesh, solved);
-    const double seconds = clock.elapsed() / 1000.0;
-    const auto brainSurface = surface.surface;
-    const std::size_t imposed = surface.imposedNodes;
-    const double maximum = surface.maxDisplacementMm, residual = surface.meanResidualMm;
-    return [this, mesh, brainSurface, meshId, rigidId, imposed, maximum, residual, solved, seconds] {
+  controls_->start(tr("Matching the brain surface ..."), [this, inputs, report](CancelFlag cancel) -> BackgroundRun::Delivery {
+    const DeformationOutcome outcome = deformAndSolve(inputs, cancel, report);
+    return [this, mesh = inputs.mesh, meshId = inputs.meshId, rigidId = inputs.rigidId, outcome] {
       if (auto meshNode = std::dynamic_pointer_cast<ModelNode>(scene_.node(meshId))) meshNode->setMesh(mesh);
-      auto surfaceNode = scene_.findByName<ModelNode>(surfaceNodeName().toStdString());
-      if (surfaceNode) {
-        surfaceNode->setMesh(brainSurface);
-      } else {
-        surfaceNode = ModelNode::create(surfaceNodeName().toStdString(), brainSurface);
-        ModelDisplay display;
-        display.scalarVisibility = true;
-        display.activeScalarName = "DisplacementMagnitude";
-        surfaceNode->setDisplay(display);
-        surfaceNode->setRole("preop");
-        if (scene_.node(rigidId)) surfaceNode->setParentTransformId(rigidId);
-        scene_.add(surfaceNode);
-      }
-      controls_->finish(true, tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
-                                 "rank(s), %7 iterations, residual %8.")
-                                .arg(seconds, 0, 'f', 1)
-                                .arg(imposed)
-                                .arg(maximum, 0, 'f', 1)
-                                .arg(residual, 0, 'f', 2)
-                                .arg(solved.equations)
-                                .arg(solved.ranks)
-                                .arg(solved.iterations)
-                                .arg(solved.relativeResidual, 0, 'e', 1));
+      placeBrainSurface(scene_, surfaceNodeName().toStdString(), outcome.brainSurface, rigidId);
+      controls_->finish(true, doneMessage(outcome));
     };
   });
   showStage("surface", 0.0);

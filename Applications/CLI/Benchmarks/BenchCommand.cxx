@@ -16,6 +16,8 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -74,7 +76,7 @@ CaseParameters caseOfSize(const std::string& size, std::uint64_t seed)
   return parameters;
 }
 
-void runRigidBench(const RigidBenchOptions& o)
+void requireRigidBenchOptions(const RigidBenchOptions& o)
 {
   if (o.trials == 0 || o.runs == 0) throw InputError("--trials and --runs must be at least 1");
   for (double r : o.rotations) {
@@ -83,14 +85,15 @@ void runRigidBench(const RigidBenchOptions& o)
   for (double t : o.translations) {
     if (!(t >= 0 && t <= 50)) throw InputError("--translations: each must be within 0 to 50 mm");
   }
-  const CaseParameters defaults = caseOfSize(o.size, o.seed);
-  RigidRegistrationParameters registration;
+}
 
-  // Accuracy and speed on the case with its default misalignment.
+/// Accuracy and speed on the case with its default misalignment, timed from the files as a user
+/// (and elastix in the comparison) meets them: rigid_accuracy.json and the last run's transform.
+void benchDefaultMisalignment(const RigidBenchOptions& o, const CaseParameters& defaults, const RigidRegistrationParameters& registration)
+{
   std::printf("bench rigid: %s case, %u runs\n", o.size.c_str(), o.runs);
   const SimulatedCase simulated = simulateCase(defaults);
   writeCase(simulated, defaults, o.outputDir / "case");
-  // Timed from the files, as a user (and elastix in the comparison) meets them.
   const CaseFiles files(o.outputDir / "case");
   std::vector<double> seconds;
   RigidRegistrationResult result;
@@ -120,60 +123,89 @@ void runRigidBench(const RigidBenchOptions& o)
   writeTextFileAtomically(o.outputDir / "rigid_accuracy.json", summary.dump(2) + "\n");
   std::printf("  head TRE mean %.3f max %.3f mm, rotation error %.3f degrees, median %.2f s\n", accuracy.headMeanMm,
               accuracy.headMaxMm, accuracy.rotationErrorDegrees, sorted[sorted.size() / 2]);
-  if (!o.captureRange) return;
+}
 
-  // The capture range: random axes and directions (seeded) at each rotation and translation size.
+/// A unit vector of a seeded random direction.
+std::array<double, 3> randomDirection(std::mt19937_64& rng, std::normal_distribution<double>& gauss)
+{
+  std::array<double, 3> v{gauss(rng), gauss(rng), gauss(rng)};
+  const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  for (double& x : v) x /= n;
+  return v;
+}
+
+/// The case misaligned by a rotation about `axis` and a translation along `direction` (the axis
+/// and angle as the Euler angles the case takes).
+CaseParameters misalignedCase(const CaseParameters& defaults, double rotation, const std::array<double, 3>& axis, double translation,
+                              const std::array<double, 3>& direction)
+{
+  auto euler = itk::Euler3DTransform<double>::New();
+  itk::Versor<double> versor;
+  itk::Versor<double>::VectorType versorAxis;
+  for (int i = 0; i < 3; ++i) versorAxis[i] = axis[i];
+  versor.Set(versorAxis, rotation * M_PI / 180.0);
+  euler->SetMatrix(versor.GetMatrix());
+  CaseParameters parameters = defaults;
+  parameters.rotationDegrees = {euler->GetAngleX() * 180.0 / M_PI, euler->GetAngleY() * 180.0 / M_PI, euler->GetAngleZ() * 180.0 / M_PI};
+  for (int i = 0; i < 3; ++i) parameters.translationMillimetres[i] = translation * direction[i];
+  return parameters;
+}
+
+/// One trial of the capture range: registers the case, appends its row; whether it succeeded.
+bool captureTrial(const CaseParameters& parameters, const RigidRegistrationParameters& registration, double rotation,
+                  double translation, unsigned trial, std::ostringstream& csv)
+{
+  const SimulatedCase trialCase = simulateCase(parameters);
+  Stopwatch clock;
+  RigidRegistrationResult r;
+  bool trustworthy = true;
+  RigidAccuracy a{1e9, 1e9, 180, 1e9};
+  try {
+    r = registerRigidly(*trialCase.intraopImage, *trialCase.preopImage, trialCase.preopLabels, registration);
+    trustworthy = r.trustworthy;
+    a = accuracyOf(*r.intraopToPreop, trialCase);
+  } catch (const MethodError&) {
+    trustworthy = false; // refused outright: detected
+  }
+  const bool success = a.success();
+  csv << rotation << ',' << translation << ',' << trial << ',' << success << ',' << trustworthy << ',' << a.headMeanMm << ','
+      << a.headMaxMm << ',' << a.rotationErrorDegrees << ',' << clock.seconds() << ',' << r.normalizedMutualInformation << ','
+      << r.overlap << '\n';
+  return success;
+}
+
+/// The capture range: random axes and directions (seeded) at each rotation and translation size
+/// (capture_range.csv).
+void benchCaptureRange(const RigidBenchOptions& o, const CaseParameters& defaults, const RigidRegistrationParameters& registration)
+{
   std::ostringstream csv;
   csv << "rotation_degrees,translation_mm,trial,success,trustworthy,head_tre_mean_mm,head_tre_max_mm,"
          "rotation_error_degrees,wall_seconds,nmi,overlap\n";
   std::mt19937_64 rng(o.seed);
   std::normal_distribution<double> gauss(0.0, 1.0);
-  auto randomDirection = [&] {
-    std::array<double, 3> v{gauss(rng), gauss(rng), gauss(rng)};
-    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    for (double& x : v) x /= n;
-    return v;
-  };
   for (double rotation : o.rotations) {
     for (double translation : o.translations) {
       unsigned successes = 0;
       for (unsigned trial = 0; trial < o.trials; ++trial) {
-        const auto axis = randomDirection();
-        const auto direction = randomDirection();
-        // Axis and angle as the Euler angles the case takes.
-        auto euler = itk::Euler3DTransform<double>::New();
-        itk::Versor<double> versor;
-        itk::Versor<double>::VectorType versorAxis;
-        for (int i = 0; i < 3; ++i) versorAxis[i] = axis[i];
-        versor.Set(versorAxis, rotation * M_PI / 180.0);
-        euler->SetMatrix(versor.GetMatrix());
-        CaseParameters parameters = defaults;
-        parameters.rotationDegrees = {euler->GetAngleX() * 180.0 / M_PI, euler->GetAngleY() * 180.0 / M_PI,
-                                      euler->GetAngleZ() * 180.0 / M_PI};
-        for (int i = 0; i < 3; ++i) parameters.translationMillimetres[i] = translation * direction[i];
-        const SimulatedCase trialCase = simulateCase(parameters);
-        Stopwatch clock;
-        RigidRegistrationResult r;
-        bool trustworthy = true;
-        RigidAccuracy a{1e9, 1e9, 180, 1e9};
-        try {
-          r = registerRigidly(*trialCase.intraopImage, *trialCase.preopImage, trialCase.preopLabels, registration);
-          trustworthy = r.trustworthy;
-          a = accuracyOf(*r.intraopToPreop, trialCase);
-        } catch (const MethodError&) {
-          trustworthy = false; // refused outright: detected
-        }
-        const bool success = a.success();
-        successes += success;
-        csv << rotation << ',' << translation << ',' << trial << ',' << success << ',' << trustworthy << ','
-            << a.headMeanMm << ',' << a.headMaxMm << ',' << a.rotationErrorDegrees << ',' << clock.seconds() << ','
-            << r.normalizedMutualInformation << ',' << r.overlap << '\n';
+        const auto axis = randomDirection(rng, gauss);
+        const auto direction = randomDirection(rng, gauss);
+        const CaseParameters parameters = misalignedCase(defaults, rotation, axis, translation, direction);
+        successes += captureTrial(parameters, registration, rotation, translation, trial, csv);
       }
       std::printf("  rotation %4.0f deg, translation %4.0f mm: %u/%u\n", rotation, translation, successes, o.trials);
       std::fflush(stdout);
     }
   }
   writeTextFileAtomically(o.outputDir / "capture_range.csv", csv.str());
+}
+
+void runRigidBench(const RigidBenchOptions& o)
+{
+  requireRigidBenchOptions(o);
+  const CaseParameters defaults = caseOfSize(o.size, o.seed);
+  const RigidRegistrationParameters registration;
+  benchDefaultMisalignment(o, defaults, registration);
+  if (o.captureRange) benchCaptureRange(o, defaults, registration);
 }
 
 struct ClassifyBenchOptions {

@@ -114,36 +114,38 @@ SurfaceScore scoreSurface(const SimulatedCase& c, const LabelMapMesh& mesh, cons
   return score;
 }
 
-void runSurfaceBench(const SurfaceBenchOptions& o)
-{
-  if (o.size != "full" && o.size != "small") throw InputError("--size: '" + o.size + "' is neither full nor small");
-  CaseParameters defaults;
-  defaults.size = o.size == "full" ? CaseSize::Full : CaseSize::Small;
-  defaults.seed = o.seed;
-  std::printf("bench surface: %s case, mesh %.1f mm\n", o.size.c_str(), o.meshResolutionMm);
-  std::fflush(stdout);
-  const SimulatedCase reference = simulateCase(defaults);
-  MeshingParameters meshing;
-  meshing.resolutionMm = o.meshResolutionMm;
-  const LabelMapMesh mesh = meshLabelMap(*reference.preopLabels, meshing);
+/// surface_sweep.csv, and a line per row.
+class SurfaceSweepTable {
+public:
+  SurfaceSweepTable()
+  {
+    csv_ << "variable,value,target,method,surface_nodes,imposed_nodes,iterations,mean_error_mm,p95_error_mm,max_error_mm,"
+            "moving_nodes,moving_mean_error_mm,moving_true_mm,true_max_mm,true_mean_mm,residual_true_mm,residual_target_mm,seconds\n";
+  }
 
-  std::ostringstream csv;
-  csv << "variable,value,target,method,surface_nodes,imposed_nodes,iterations,mean_error_mm,p95_error_mm,max_error_mm,"
-         "moving_nodes,moving_mean_error_mm,moving_true_mm,true_max_mm,true_mean_mm,residual_true_mm,residual_target_mm,seconds\n";
-  auto row = [&](const char* variable, double value, const char* target, const std::string& method, const SurfaceScore& s) {
+  void row(const char* variable, double value, const char* target, const std::string& method, const SurfaceScore& s)
+  {
     const SurfaceDisplacementAccuracy& a = s.accuracy;
-    csv << variable << ',' << value << ',' << target << ',' << method << ',' << s.result.surfaceNodes << ','
-        << s.result.imposedNodes << ',' << s.result.iterations << ',' << a.meanErrorMm << ',' << a.p95ErrorMm << ','
-        << a.maxErrorMm << ',' << a.movingNodes << ',' << a.movingMeanErrorMm << ',' << a.movingMeanTrueDisplacementMm << ','
-        << a.maxTrueDisplacementMm << ',' << a.meanTrueDisplacementMm << ',' << a.meanResidualMm << ','
-        << s.result.meanResidualMm << ',' << s.seconds << '\n';
+    csv_ << variable << ',' << value << ',' << target << ',' << method << ',' << s.result.surfaceNodes << ','
+         << s.result.imposedNodes << ',' << s.result.iterations << ',' << a.meanErrorMm << ',' << a.p95ErrorMm << ','
+         << a.maxErrorMm << ',' << a.movingNodes << ',' << a.movingMeanErrorMm << ',' << a.movingMeanTrueDisplacementMm << ','
+         << a.maxTrueDisplacementMm << ',' << a.meanTrueDisplacementMm << ',' << a.meanResidualMm << ','
+         << s.result.meanResidualMm << ',' << s.seconds << '\n';
     std::printf("  %s %.1f, %s target, %s: error mean %.2f p95 %.2f mm (moving %.2f of %.2f mm), residual %.2f mm, %.2f s\n",
                 variable, value, target, method.c_str(), a.meanErrorMm, a.p95ErrorMm, a.movingMeanErrorMm, a.movingMeanTrueDisplacementMm,
                 a.meanResidualMm, s.seconds);
     std::fflush(stdout);
-  };
+  }
 
-  // Shift size: the true labels (the method alone) and the classification (the pipeline).
+  std::string text() const { return csv_.str(); }
+
+private:
+  std::ostringstream csv_;
+};
+
+/// Shift size: the true labels (the method alone) and the classification (the pipeline).
+void sweepShifts(const SurfaceBenchOptions& o, const CaseParameters& defaults, const LabelMapMesh& mesh, SurfaceSweepTable& table)
+{
   for (double shift : o.shifts) {
     CaseParameters parameters = defaults;
     parameters.shiftMillimetres = shift;
@@ -153,20 +155,27 @@ void runSurfaceBench(const SurfaceBenchOptions& o)
     const TissueClassificationResult classified =
       classifyTissues(*c.intraopImage, *c.preopLabels, *rigid.intraopToPreop, std::nullopt, TissueClassificationParameters{});
     for (const std::string& method : o.methods) {
-      row("shift", shift, "truth", method, scoreSurface(c, mesh, *c.intraopLabels, *rigid.intraopToPreop, method));
-      row("shift", shift, "classified", method, scoreSurface(c, mesh, *classified.labels, *rigid.intraopToPreop, method));
+      table.row("shift", shift, "truth", method, scoreSurface(c, mesh, *c.intraopLabels, *rigid.intraopToPreop, method));
+      table.row("shift", shift, "classified", method, scoreSurface(c, mesh, *classified.labels, *rigid.intraopToPreop, method));
     }
   }
-  // Corrupted brain masks, on the default shift, with the true rigid transform (the mask alone varies).
+}
+
+/// Corrupted brain masks, on the default shift, with the true rigid transform (the mask alone varies).
+void sweepCorruption(const SurfaceBenchOptions& o, const SimulatedCase& reference, const LabelMapMesh& mesh, SurfaceSweepTable& table)
+{
   for (double amplitude : o.corruption) {
     const LabelImage::Pointer corrupted = corruptedBrain(*reference.intraopLabels, amplitude, o.seed + 17);
     for (const std::string& method : o.methods) {
-      row("corruption", amplitude, "corrupted", method, scoreSurface(reference, mesh, *corrupted, *reference.rigidIntraopToPreop, method));
+      table.row("corruption", amplitude, "corrupted", method,
+                scoreSurface(reference, mesh, *corrupted, *reference.rigidIntraopToPreop, method));
     }
   }
-  writeTextFileAtomically(o.outputDir / "surface_sweep.csv", csv.str());
+}
 
-  // Speed on the default case: the stage's parts, median of the runs.
+/// Speed on the default case: the stage's parts, median of the runs (surface_speed.json).
+void benchSurfaceSpeed(const SurfaceBenchOptions& o, const SimulatedCase& reference, const LabelMapMesh& mesh)
+{
   std::vector<double> total, preop, target, iterations;
   SurfaceScore last;
   for (unsigned run = 0; run < std::max(1u, o.runs); ++run) {
@@ -196,6 +205,25 @@ void runSurfaceBench(const SurfaceBenchOptions& o)
   writeTextFileAtomically(o.outputDir / "surface_speed.json", speed.dump(2) + "\n");
   std::printf("  speed: %.2f s (preoperative boundary %.2f s, target %.2f s, iterations %.2f s)\n", median(total), median(preop),
               median(target), median(iterations));
+}
+
+void runSurfaceBench(const SurfaceBenchOptions& o)
+{
+  if (o.size != "full" && o.size != "small") throw InputError("--size: '" + o.size + "' is neither full nor small");
+  CaseParameters defaults;
+  defaults.size = o.size == "full" ? CaseSize::Full : CaseSize::Small;
+  defaults.seed = o.seed;
+  std::printf("bench surface: %s case, mesh %.1f mm\n", o.size.c_str(), o.meshResolutionMm);
+  std::fflush(stdout);
+  const SimulatedCase reference = simulateCase(defaults);
+  MeshingParameters meshing;
+  meshing.resolutionMm = o.meshResolutionMm;
+  const LabelMapMesh mesh = meshLabelMap(*reference.preopLabels, meshing);
+  SurfaceSweepTable table;
+  sweepShifts(o, defaults, mesh, table);
+  sweepCorruption(o, reference, mesh, table);
+  writeTextFileAtomically(o.outputDir / "surface_sweep.csv", table.text());
+  benchSurfaceSpeed(o, reference, mesh);
 }
 
 } // namespace
