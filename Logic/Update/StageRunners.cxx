@@ -288,7 +288,11 @@ FiniteElementResult solveInSession(SerialScanSession& session, FiniteElementJob 
                                    bool& prepared)
 {
   if (job.solverOptions.find("-ksp_type") == std::string::npos && job.solverOptions.find("-pc_type") == std::string::npos) {
-    job.solverOptions = "-ksp_type cg -pc_type bjacobi " + job.solverOptions;
+    // Incomplete Cholesky in the blocks, as the worker's tuned default does: PETSc's ILU(0) there
+    // is not always positive, and CG broke down on it (KSP reason -8) on the small case meshed
+    // with grading 1.
+    const bool subGiven = job.solverOptions.find("-sub_pc_type") != std::string::npos;
+    job.solverOptions = std::string("-ksp_type cg -pc_type bjacobi ") + (subGiven ? "" : "-sub_pc_type icc ") + job.solverOptions;
   }
   auto sameProblem = [&job](const FiniteElementJob& other) {
     if (other.nodes != job.nodes || other.tetrahedra != job.tetrahedra || other.materialOfTetrahedron != job.materialOfTetrahedron ||
