@@ -106,15 +106,6 @@ void IntraoperativeUpdateLogic::cancel()
 }
 
 namespace {
-/// The trust assessment's verdict in a scan's report, or "not assessed".
-std::string trustIn(const nlohmann::json& report)
-{
-  if (report.contains("trust") && report["trust"].contains("nonrigid") && report["trust"]["nonrigid"].is_string()) {
-    return report["trust"]["nonrigid"].get<std::string>();
-  }
-  return "not assessed";
-}
-
 /// What a scan's report says of its stages, warnings and trust.
 void readScanReport(const RunReport& report, ScanUpdate& scan)
 {
@@ -131,7 +122,7 @@ void readScanReport(const RunReport& report, ScanUpdate& scan)
       if (warning.is_string()) scan.warnings.push_back(warning.get<std::string>());
     }
   }
-  scan.trust = trustIn(document);
+  scan.trust = nonrigidUpdateTrustIn(document);
 }
 } // namespace
 
