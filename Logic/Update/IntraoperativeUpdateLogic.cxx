@@ -150,11 +150,12 @@ void IntraoperativeUpdateLogic::registerScan(ScanUpdate& scan, const UpdateProgr
     scan.outcome = "registered";
   } catch (const CancelledError& e) {
     scan.cancelled = true;
-    scan.outcome = "cancelled";
+    scan.outcome = scan.failure = "cancelled";
     report.addWarning(std::string("the update was cancelled: ") + e.what());
     report.save();
   } catch (const std::exception& e) { // one scan's failure does not end the session
-    scan.outcome = std::string("failed: ") + e.what();
+    scan.failure = e.what();
+    scan.outcome = "failed: " + scan.failure;
   }
   if (!scan.registered) {
     scan.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -181,7 +182,8 @@ ScanUpdate IntraoperativeUpdateLogic::update(const fs::path& intraopImage, const
   fs::create_directories(scan.outputDir, ec);
   session_.cancelRequested = false;
   if (ec) {
-    scan.outcome = "failed: " + scan.outputDir.string() + ": cannot create the scan's folder (" + ec.message() + ")";
+    scan.failure = scan.outputDir.string() + ": cannot create the scan's folder (" + ec.message() + ")";
+    scan.outcome = "failed: " + scan.failure;
   } else {
     registerScan(scan, progress);
   }
