@@ -67,12 +67,12 @@ void checkEvaluationOfTheTruth(const SimulatedCase& c, const CaseFiles& files, c
 }
 } // namespace
 
-int BuiltInCaseFilesTest(int, char*[])
+int CaseSimulationBuiltInCaseFilesTest(int, char*[])
 {
-  return brainshift::testing::runTest("BuiltInCaseFilesTest", [] {
+  return brainshift::testing::runTest("CaseSimulationBuiltInCaseFilesTest", [] {
     checkParameters();
     const SimulatedCase& c = testing::smallCase();
-    const fs::path root = testing::temporaryFolder("BuiltInCaseFilesTest");
+    const fs::path root = testing::temporaryFolder("CaseSimulationBuiltInCaseFilesTest");
     const CaseFiles files(root / "case");
     CaseParameters parameters;
     parameters.size = CaseSize::Small;
