@@ -1,23 +1,17 @@
+// brainshift demo: the built-in case (Logic/CaseSimulation/BuiltInCaseFiles.h) built and written,
+// register run on it (Logic/Update/UpdatePipeline.h), and what it wrote evaluated against the case's
+// truth (Logic/CaseSimulation/UpdateEvaluationAgainstTruth.h). This file parses the options, calls
+// the logic and prints.
 #include "AtomicFile.h"
-#include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
-#include "LabelOverlap.h"
-#include "ModelIO.h"
-#include "SurfaceDisplacementEvaluation.h"
-#include "LandmarkEvaluation.h"
-#include "UncertaintyEvaluation.h"
-#include "VolumeIO.h"
+#include "BuiltInCaseFiles.h"
 #include "RunCommands.h"
-#include "SceneIO.h"
+#include "UpdateEvaluationAgainstTruth.h"
 
-#include <itkIdentityTransform.h>
-
+#include <array>
 #include <cstdio>
-#include <iostream>
 #include <memory>
-#include <optional>
 #include <set>
-#include <utility>
 
 namespace brainshift::cli {
 namespace fs = std::filesystem;
@@ -43,73 +37,35 @@ struct DemoOptions {
   std::set<std::string> given;
 };
 
+/// The options given on the command line as values over the scenario's.
+CaseParameterOverrides caseOverridesOf(const DemoOptions& o)
+{
+  auto given = [&](const char* option) { return o.given.count(option) > 0; };
+  CaseParameterOverrides overrides;
+  if (given("--seed")) overrides.seed = o.seed;
+  if (given("--shift")) overrides.shiftMillimetres = o.shift;
+  if (given("--craniotomy")) overrides.craniotomy = craniotomySiteFromString(o.craniotomy);
+  if (given("--no-resection")) overrides.resection = !o.noResection;
+  if (given("--rotation")) overrides.rotationDegrees = std::array<double, 3>{o.rotation[0], o.rotation[1], o.rotation[2]};
+  if (given("--translation")) {
+    overrides.translationMillimetres = std::array<double, 3>{o.translation[0], o.translation[1], o.translation[2]};
+  }
+  if (given("--noise")) overrides.noiseFraction = o.noise;
+  if (given("--bias")) overrides.biasStrength = o.bias;
+  if (given("--contrast")) overrides.contrast = intraopContrastFromString(o.contrast);
+  if (given("--tumour")) overrides.tumourAppearance = tumourAppearanceFromString(o.tumour);
+  if (given("--gap")) overrides.gap = gapContentFromString(o.gap);
+  if (given("--cavity-rim")) overrides.cavityRim = o.cavityRim;
+  if (given("--truth")) overrides.truth = truthModelFromString(o.truth);
+  if (given("--field-of-view")) overrides.fieldOfView = fieldOfViewFromString(o.fieldOfView);
+  return overrides;
+}
+
 /// The scenario's parameters with the options given on the command line over them.
 CaseParameters caseParametersOf(const DemoOptions& o)
 {
-  CaseParameters p = caseScenario(o.scenario).parameters;
   if (o.size != "full" && o.size != "small") throw InputError("--size: '" + o.size + "' is neither full nor small");
-  p.size = o.size == "full" ? CaseSize::Full : CaseSize::Small;
-  auto given = [&](const char* option) { return o.given.count(option) > 0; };
-  if (given("--seed")) p.seed = o.seed;
-  if (given("--shift")) p.shiftMillimetres = o.shift;
-  if (given("--craniotomy")) p.craniotomy = craniotomySiteFromString(o.craniotomy);
-  if (given("--no-resection")) p.resection = !o.noResection;
-  for (int i = 0; i < 3; ++i) {
-    if (given("--rotation")) p.rotationDegrees[i] = o.rotation[i];
-    if (given("--translation")) p.translationMillimetres[i] = o.translation[i];
-  }
-  if (given("--noise")) p.noiseFraction = o.noise;
-  if (given("--bias")) p.biasStrength = o.bias;
-  if (given("--contrast")) p.contrast = intraopContrastFromString(o.contrast);
-  if (given("--tumour")) p.tumourAppearance = tumourAppearanceFromString(o.tumour);
-  if (given("--gap")) p.gap = gapContentFromString(o.gap);
-  if (given("--cavity-rim")) p.cavityRim = o.cavityRim;
-  if (given("--truth")) p.truth = truthModelFromString(o.truth);
-  if (given("--field-of-view")) p.fieldOfView = fieldOfViewFromString(o.fieldOfView);
-  p.validate();
-  return p;
-}
-
-/// The case as a 3D Slicer scene: the intraoperative scan in the world, the preoperative data
-/// under the true intraop_to_preop transform (so they overlay it), the truth labels, the landmarks.
-void writeCaseScene(const SimulatedCase& simulated, const CaseFiles& files)
-{
-  Scene scene;
-  auto stored = [](auto node, const fs::path& file) {
-    node->setStorageFile(fs::absolute(file));
-    node->markStored();
-    return node;
-  };
-  auto truth = scene.add(stored(TransformNode::create("truth intraop_to_preop", simulated.intraopToPreop), files.truthTransform));
-  truth->setRole("truth");
-  auto intraop = scene.add(stored(ScalarVolumeNode::create("intraop image", simulated.intraopImage), files.intraopImage));
-  intraop->setRole("intraop");
-  auto preop = scene.add(stored(ScalarVolumeNode::create("preop image", simulated.preopImage), files.preopImage));
-  preop->setRole("preop");
-  preop->setParentTransformId(truth->id());
-  auto labels = scene.add(stored(LabelMapVolumeNode::create("preop labels", simulated.preopLabels), files.preopLabels));
-  labels->setRole("preop");
-  labels->setParentTransformId(truth->id());
-  auto fmri = scene.add(stored(ScalarVolumeNode::create("preop fmri", simulated.preopFmri), files.preopFmri));
-  fmri->setRole("overlay");
-  fmri->setDisplay(VolumeDisplay::statisticalMap());
-  fmri->setParentTransformId(truth->id());
-  auto truthLabels = scene.add(stored(LabelMapVolumeNode::create("truth intraop labels", simulated.intraopLabels), files.truthIntraopLabels));
-  truthLabels->setRole("truth");
-  auto landmarks = scene.add(LandmarksNode::create("landmarks", simulated.landmarks));
-  landmarks->setRole("truth");
-  landmarks->setParentTransformId(truth->id());
-  // Slicer opens on the intraoperative scan with the true intraoperative labels over it.
-  SliceViewLayers layers;
-  layers.backgroundVolumeId = intraop->id();
-  layers.labelVolumeId = truthLabels->id();
-  scene.setSliceViewLayers(layers);
-  writeScene(scene, files.folder / "scene.mrml");
-}
-
-json evaluationOf(const SpatialTransform& transform, const std::vector<LandmarkPair>& landmarks)
-{
-  return json::parse(toJsonText(evaluateTransform(transform, landmarks)));
+  return builtInCaseParameters(o.scenario, o.size == "full" ? CaseSize::Full : CaseSize::Small, caseOverridesOf(o));
 }
 
 void addCaseOptions(CLI::App* command, DemoOptions& o)
@@ -160,151 +116,65 @@ void removeEarlierDemoReport(const fs::path& out, const fs::path& reportFile)
   fs::remove(reportFile);
 }
 
-/// Builds the case and writes it (with its scene) to `files`; returns it and the seconds it took.
-std::pair<SimulatedCase, double> buildCase(const CaseParameters& parameters, const DemoOptions& o, const CaseFiles& files)
+/// Builds the case and writes it (with its scene) to `files`, saying so.
+BuiltInCase buildCase(const CaseParameters& parameters, const DemoOptions& o, const CaseFiles& files)
 {
-  Stopwatch caseClock;
   std::printf("building the built-in case, scenario %s (%s, seed %llu, shift %.1f mm, %s craniotomy%s, %s contrast, %s gap) ...\n",
               o.scenario.c_str(), o.size.c_str(), static_cast<unsigned long long>(parameters.seed), parameters.shiftMillimetres,
               toString(parameters.craniotomy).c_str(), parameters.resection ? ", resection" : "", toString(parameters.contrast).c_str(),
               toString(parameters.gap).c_str());
   std::fflush(stdout);
-  SimulatedCase simulated = simulateCase(parameters);
-  writeCase(simulated, parameters, files.folder);
-  writeCaseScene(simulated, files);
-  const double caseSeconds = caseClock.seconds();
-  const CaseFigures& f = simulated.figures;
-  std::printf("  %zu landmarks, max brain displacement %.2f mm, gap %.1f ml, cavity %.1f ml (%.1f s)\n", simulated.landmarks.size(),
-              f.maxBrainDisplacementMm, f.gapVolumeMl, f.cavityVolumeMl, caseSeconds);
-  return {std::move(simulated), caseSeconds};
+  BuiltInCase built = buildBuiltInCaseFiles(parameters, files);
+  const CaseFigures& f = built.simulated.figures;
+  std::printf("  %zu landmarks, max brain displacement %.2f mm, gap %.1f ml, cavity %.1f ml (%.1f s)\n", built.simulated.landmarks.size(),
+              f.maxBrainDisplacementMm, f.gapVolumeMl, f.cavityVolumeMl, built.seconds);
+  return built;
 }
 
-/// How register ended on the case: complete, or stopped by a missing tool (noted), or with its
-/// non-rigid update rejected by the trust assessment (`rejected`: the rigid result replaced it in
-/// every file; the demo still evaluates it, and the update set aside, then fails with its reason).
-struct RegistrationEnd {
-  bool pipelineComplete = false;
-  std::optional<MethodError> rejected;
-};
-
-RegistrationEnd registerCase(RunContext& context, RunReport& report)
+/// The register inputs of the built-in case: its images and labels, its fMRI as an overlay.
+RunOptions registrationOptionsFor(const CaseFiles& files, RunOptions run)
 {
-  RegistrationEnd end;
-  try {
-    runRegistration(context);
-    end.pipelineComplete = true;
-  } catch (const NotAvailableError& e) {
-    report.addWarning(std::string(e.what()) + "; the demo evaluates what exists");
-    std::printf("note: %s\n", e.what());
-  } catch (const MethodError& e) {
-    report.addWarning(e.what());
-    report.save();
-    const json& document = report.document();
-    const bool fellBack = document.contains("stages") && document["stages"].contains("warp") &&
-                          document["stages"]["warp"].value("rigid_fallback", false);
-    if (!fellBack) throw;
-    end.rejected = e;
+  run.preopImage = files.preopImage;
+  run.preopLabels = files.preopLabels;
+  run.intraopImage = files.intraopImage;
+  run.overlays = {"fmri=" + files.preopFmri.string()};
+  return run;
+}
+
+/// Runs register on the case; a missing tool is noted (the demo evaluates what exists).
+RegistrationEnd registerCase(RunContext& context)
+{
+  const RegistrationEnd end = runRegistrationForEvaluation(context);
+  if (end.notAvailable) {
+    context.report().addWarning(std::string(end.notAvailable->what()) + "; the demo evaluates what exists");
+    std::printf("note: %s\n", end.notAvailable->what());
   }
   return end;
 }
 
-/// Target registration errors of the reference transforms and of those the run wrote.
-json transformEvaluations(const SimulatedCase& simulated, const fs::path& out)
+/// The classification, surface and confidence map figures of evaluation.json, a line each.
+void printEvaluationAgainstTruth(const json& evaluation)
 {
-  json transforms = json::object();
-  auto identity = itk::IdentityTransform<double, 3>::New();
-  transforms["identity"] = evaluationOf(*identity, simulated.landmarks);
-  transforms["truth_rigid"] = evaluationOf(*simulated.rigidIntraopToPreop, simulated.landmarks);
-  transforms["truth"] = evaluationOf(*simulated.intraopToPreop, simulated.landmarks);
-  std::error_code ec;
-  for (const auto& [key, file] : {std::pair<std::string, fs::path>{"brainshift_rigid", out / "rigid_intraop_to_preop.tfm"},
-                                  {"brainshift", out / "intraop_to_preop.h5"},
-                                  {"brainshift_rejected_update", out / "rejected_intraop_to_preop.h5"}}) {
-    if (fs::exists(file, ec)) transforms[key] = evaluationOf(*readTransform(file), simulated.landmarks);
+  if (evaluation.contains("classification")) {
+    const json& c = evaluation["classification"];
+    std::printf("classification: brain Dice %.3f, ventricles %.3f, brain surface distance %.2f mm\n", c["brain_dice"].get<double>(),
+                c["ventricle_dice"].get<double>(), c["brain_surface_distance_mm"].get<double>());
   }
-  return transforms;
-}
-
-json classificationEvaluation(const SimulatedCase& simulated, const fs::path& classifiedFile)
-{
-  const LabelImage::Pointer classified = readLabelVolume(classifiedFile);
-  const LabelImage& truthLabels = *simulated.intraopLabels;
-  const json c = {{"brain_dice", diceCoefficient(*classified, truthLabels, {2, 3, 4})},
-                  {"ventricle_dice", diceCoefficient(*classified, truthLabels, {3})},
-                  {"parenchyma_dice", diceCoefficient(*classified, truthLabels, {2})},
-                  {"brain_surface_distance_mm", meanSurfaceDistanceMm(*classified, truthLabels, {2, 3, 4})}};
-  std::printf("classification: brain Dice %.3f, ventricles %.3f, brain surface distance %.2f mm\n", c["brain_dice"].get<double>(),
-              c["ventricle_dice"].get<double>(), c["brain_surface_distance_mm"].get<double>());
-  return c;
-}
-
-/// The surface's displacements against the truth, in the model frame of the rigid result used;
-/// nothing when the surface file holds no surface.
-std::optional<json> surfaceEvaluation(const SimulatedCase& simulated, const fs::path& out)
-{
-  vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(out / "brain_surface.vtp"));
-  const SpatialTransform::Pointer rigid = readTransform(out / "rigid_intraop_to_preop.tfm");
-  if (!surface) return std::nullopt;
-  const SurfaceDisplacementAccuracy a = evaluateSurfaceDisplacement(surface, *simulated.intraopToPreop, *rigid, *simulated.preopLabels);
-  std::printf("surface: displacement error mean %.2f mm, p95 %.2f mm (true mean %.2f, max %.2f mm); "
-              "where it moves > 2 mm: %.2f mm of %.2f mm; residual to the true boundary %.2f mm\n",
-              a.meanErrorMm, a.p95ErrorMm, a.meanTrueDisplacementMm, a.maxTrueDisplacementMm, a.movingMeanErrorMm,
-              a.movingMeanTrueDisplacementMm, a.meanResidualMm);
-  return json{{"imposed_nodes", a.nodes},
-              {"mean_error_mm", a.meanErrorMm},
-              {"median_error_mm", a.medianErrorMm},
-              {"p95_error_mm", a.p95ErrorMm},
-              {"max_error_mm", a.maxErrorMm},
-              {"true_mean_displacement_mm", a.meanTrueDisplacementMm},
-              {"true_max_displacement_mm", a.maxTrueDisplacementMm},
-              {"moving_nodes", a.movingNodes},
-              {"moving_mean_error_mm", a.movingMeanErrorMm},
-              {"moving_p95_error_mm", a.movingP95ErrorMm},
-              {"moving_true_mean_displacement_mm", a.movingMeanTrueDisplacementMm},
-              {"residual_to_true_boundary_mm", a.meanResidualMm},
-              {"p95_residual_to_true_boundary_mm", a.p95ResidualMm}};
-}
-
-/// The confidence map against the true error (written as true_error_mm.nii.gz).
-json uncertaintyEvaluation(const SimulatedCase& simulated, const fs::path& out)
-{
-  const UncertaintyValidation u =
-    validateUncertainty(*readDisplacementField(out / "displacement_intraop_to_preop.nrrd"), *simulated.intraopToPreop,
-                        *readScalarVolume(out / "displacement_uncertainty_mm.nii.gz"), *simulated.intraopLabels);
-  const json evaluation = {{"voxels", u.voxels},
-                           {"rank_correlation", u.rankCorrelation},
-                           {"mean_true_error_mm", u.meanTrueErrorMm},
-                           {"mean_estimate_mm", u.meanEstimateMm},
-                           {"share_called_below_1mm", u.shareCalledBelow1Mm},
-                           {"called_below_1mm_truly_below_1_5mm", u.calledBelow1MmTrulyBelow1_5Mm},
-                           {"true_error_where_called_above_2mm", u.trueErrorWhereCalledAbove2MmMm},
-                           {"true_error_file", "true_error_mm.nii.gz"}};
-  writeScalarVolume(u.trueError, out / "true_error_mm.nii.gz");
-  std::printf("confidence map: rank correlation with the true error %.2f over %zu brain voxels; %.0f %% called below 1 mm, "
-              "%.0f %% of them truly below 1.5 mm\n",
-              u.rankCorrelation, u.voxels, 100 * u.shareCalledBelow1Mm, 100 * u.calledBelow1MmTrulyBelow1_5Mm);
-  return evaluation;
-}
-
-/// evaluation.json: the transforms' target registration errors, and the classification, surface
-/// and confidence map against the truth where the run wrote them.
-json evaluationAgainstTruth(const SimulatedCase& simulated, const fs::path& out, bool pipelineComplete)
-{
-  json evaluation = {{"landmarks", "case/landmarks.csv"},
-                     {"pairs", simulated.landmarks.size()},
-                     {"pipeline_complete", pipelineComplete},
-                     {"transforms", transformEvaluations(simulated, out)}};
-  std::error_code ec;
-  if (fs::exists(out / "intraop_labels.nii.gz", ec)) {
-    evaluation["classification"] = classificationEvaluation(simulated, out / "intraop_labels.nii.gz");
+  if (evaluation.contains("surface")) {
+    const json& a = evaluation["surface"];
+    std::printf("surface: displacement error mean %.2f mm, p95 %.2f mm (true mean %.2f, max %.2f mm); "
+                "where it moves > 2 mm: %.2f mm of %.2f mm; residual to the true boundary %.2f mm\n",
+                a["mean_error_mm"].get<double>(), a["p95_error_mm"].get<double>(), a["true_mean_displacement_mm"].get<double>(),
+                a["true_max_displacement_mm"].get<double>(), a["moving_mean_error_mm"].get<double>(),
+                a["moving_true_mean_displacement_mm"].get<double>(), a["residual_to_true_boundary_mm"].get<double>());
   }
-  if (fs::exists(out / "brain_surface.vtp", ec) && fs::exists(out / "rigid_intraop_to_preop.tfm", ec)) {
-    if (std::optional<json> surface = surfaceEvaluation(simulated, out)) evaluation["surface"] = *surface;
+  if (evaluation.contains("uncertainty")) {
+    const json& u = evaluation["uncertainty"];
+    std::printf("confidence map: rank correlation with the true error %.2f over %zu brain voxels; %.0f %% called below 1 mm, "
+                "%.0f %% of them truly below 1.5 mm\n",
+                u["rank_correlation"].get<double>(), u["voxels"].get<std::size_t>(), 100 * u["share_called_below_1mm"].get<double>(),
+                100 * u["called_below_1mm_truly_below_1_5mm"].get<double>());
   }
-  if (fs::exists(out / "displacement_uncertainty_mm.nii.gz", ec) && fs::exists(out / "displacement_intraop_to_preop.nrrd", ec)) {
-    evaluation["uncertainty"] = uncertaintyEvaluation(simulated, out);
-  }
-  return evaluation;
 }
 
 void printTargetRegistrationErrors(const json& transforms, std::size_t landmarks)
@@ -325,27 +195,23 @@ void runDemo(const DemoOptions& options)
   const fs::path reportFile = out / "report.json";
   removeEarlierDemoReport(out, reportFile);
   const CaseFiles files(out / "case");
-  const auto [simulated, caseSeconds] = buildCase(parameters, options, files);
+  const BuiltInCase built = buildCase(parameters, options, files);
 
   RunReport report(reportFile);
   report.set("demo", {{"case_folder", "case"},
-                      {"case_seconds", caseSeconds},
+                      {"case_seconds", built.seconds},
                       {"size", options.size},
                       {"seed", parameters.seed},
                       {"scenario", options.scenario},
                       {"shift_mm", parameters.shiftMillimetres}});
-  RunOptions run = options.run;
-  run.preopImage = files.preopImage;
-  run.preopLabels = files.preopLabels;
-  run.intraopImage = files.intraopImage;
-  run.overlays = {"fmri=" + files.preopFmri.string()};
-  RunContext context(run, configuration, report);
-  const RegistrationEnd end = registerCase(context, report);
+  RunContext context(registrationOptionsFor(files, options.run), configuration, report);
+  const RegistrationEnd end = registerCase(context);
 
-  const json evaluation = evaluationAgainstTruth(simulated, out, end.pipelineComplete);
+  const json evaluation = evaluateUpdateAgainstTruth(built.simulated, out, "case/landmarks.csv", end.pipelineComplete);
+  printEvaluationAgainstTruth(evaluation);
   writeTextFileAtomically(out / "evaluation.json", evaluation.dump(2) + "\n");
   report.save();
-  printTargetRegistrationErrors(evaluation["transforms"], simulated.landmarks.size());
+  printTargetRegistrationErrors(evaluation["transforms"], built.simulated.landmarks.size());
   std::printf("wrote %s (report.json, evaluation.json, case/)\n", out.c_str());
   if (end.rejected) throw *end.rejected;
 }

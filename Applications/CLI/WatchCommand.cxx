@@ -195,8 +195,7 @@ void runWatch(const WatchOptions& o)
       if (!o.exportDicom.empty()) kept.entry["dicom"] = exportScanToDicom(scan.outputDir, o.exportDicom / scan.outputDir.filename());
     } else {
       ++failures;
-      const std::string reason = scan.outcome.rfind("failed: ", 0) == 0 ? scan.outcome.substr(8) : scan.outcome;
-      std::fprintf(stderr, "brainshift watch: scan %u (%s): %s\n", number, next->first.string().c_str(), reason.c_str());
+      std::fprintf(stderr, "brainshift watch: scan %u (%s): %s\n", number, next->first.string().c_str(), scan.failure.c_str());
       if (server) pushFailure(*server, number, scan.outcome);
     }
     std::fflush(stdout);

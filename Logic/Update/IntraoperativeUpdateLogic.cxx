@@ -106,15 +106,6 @@ void IntraoperativeUpdateLogic::cancel()
 }
 
 namespace {
-/// The trust assessment's verdict in a scan's report, or "not assessed".
-std::string trustIn(const nlohmann::json& report)
-{
-  if (report.contains("trust") && report["trust"].contains("nonrigid") && report["trust"]["nonrigid"].is_string()) {
-    return report["trust"]["nonrigid"].get<std::string>();
-  }
-  return "not assessed";
-}
-
 /// What a scan's report says of its stages, warnings and trust.
 void readScanReport(const RunReport& report, ScanUpdate& scan)
 {
@@ -131,7 +122,7 @@ void readScanReport(const RunReport& report, ScanUpdate& scan)
       if (warning.is_string()) scan.warnings.push_back(warning.get<std::string>());
     }
   }
-  scan.trust = trustIn(document);
+  scan.trust = nonrigidUpdateTrustIn(document);
 }
 } // namespace
 
@@ -159,11 +150,12 @@ void IntraoperativeUpdateLogic::registerScan(ScanUpdate& scan, const UpdateProgr
     scan.outcome = "registered";
   } catch (const CancelledError& e) {
     scan.cancelled = true;
-    scan.outcome = "cancelled";
+    scan.outcome = scan.failure = "cancelled";
     report.addWarning(std::string("the update was cancelled: ") + e.what());
     report.save();
   } catch (const std::exception& e) { // one scan's failure does not end the session
-    scan.outcome = std::string("failed: ") + e.what();
+    scan.failure = e.what();
+    scan.outcome = "failed: " + scan.failure;
   }
   if (!scan.registered) {
     scan.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -190,7 +182,8 @@ ScanUpdate IntraoperativeUpdateLogic::update(const fs::path& intraopImage, const
   fs::create_directories(scan.outputDir, ec);
   session_.cancelRequested = false;
   if (ec) {
-    scan.outcome = "failed: " + scan.outputDir.string() + ": cannot create the scan's folder (" + ec.message() + ")";
+    scan.failure = scan.outputDir.string() + ": cannot create the scan's folder (" + ec.message() + ")";
+    scan.outcome = "failed: " + scan.failure;
   } else {
     registerScan(scan, progress);
   }

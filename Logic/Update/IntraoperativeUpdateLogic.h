@@ -48,6 +48,7 @@ struct ScanUpdate {
   bool registered = false;             ///< the pipeline ran to its end (the update may still be rejected: trust)
   bool cancelled = false;              ///< stopped by cancel(); nothing of it is used by later scans
   std::string outcome;                 ///< "registered", "cancelled" or "failed: <reason>"
+  std::string failure;                 ///< why it was not registered: the reason, or "cancelled"; empty when registered
   /// The trust assessment's verdict on the non-rigid update: "trusted", "doubtful", "rejected" (the
   /// rigid result stands in every file), or "not assessed" when the update did not get that far.
   std::string trust = "not assessed";

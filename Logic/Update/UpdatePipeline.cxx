@@ -364,6 +364,29 @@ void runRegistration(RunContext& context)
   }
 }
 
+RegistrationEnd runRegistrationForEvaluation(RunContext& context)
+{
+  RegistrationEnd end;
+  try {
+    runRegistration(context);
+    end.pipelineComplete = true;
+  } catch (const NotAvailableError& e) {
+    end.notAvailable = e;
+  } catch (const MethodError& e) {
+    if (nonrigidUpdateTrustIn(context.report().document()) != "rejected") throw;
+    end.rejected = e;
+  }
+  return end;
+}
+
+std::string nonrigidUpdateTrustIn(const nlohmann::json& report)
+{
+  if (report.contains("trust") && report["trust"].contains("nonrigid") && report["trust"]["nonrigid"].is_string()) {
+    return report["trust"]["nonrigid"].get<std::string>();
+  }
+  return "not assessed";
+}
+
 void runPipeline(RunContext& context)
 {
   for (const PipelineStage& stage : pipelineStages()) {

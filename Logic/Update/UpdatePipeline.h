@@ -184,6 +184,24 @@ void claimCaseForStage(RunContext& context, const std::string& stage);
 /// every stage. The report is saved after each stage and on failure.
 void runRegistration(RunContext& context);
 
+/// How a run of every stage ended for a front end that evaluates whatever the run wrote (the demo).
+struct RegistrationEnd {
+  bool pipelineComplete = false; ///< every stage ran, and the update was not rejected
+  /// A stage's tool is missing (NotAvailableError): the stages before it wrote their files.
+  std::optional<NotAvailableError> notAvailable;
+  /// The trust assessment rejected the non-rigid update: the rigid result is in every file and the
+  /// update set aside is rejected_intraop_to_preop.h5 (the error register would have ended with).
+  std::optional<MethodError> rejected;
+};
+
+/// runRegistration, with a missing tool and a rejected non-rigid update returned instead of thrown
+/// (the report, saved, records them as warnings); any other failure is thrown, as runRegistration does.
+RegistrationEnd runRegistrationForEvaluation(RunContext& context);
+
+/// The trust assessment's verdict in a run's report.json document ("trusted", "doubtful",
+/// "rejected": the rigid result stands in every file), or "not assessed" when the run did not get that far.
+std::string nonrigidUpdateTrustIn(const nlohmann::json& report);
+
 /// A stage of the intraoperative update.
 struct PipelineStage {
   std::string name;    ///< the subcommand

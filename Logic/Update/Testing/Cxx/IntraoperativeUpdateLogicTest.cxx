@@ -76,7 +76,7 @@ int IntraoperativeUpdateLogicTest(int, char*[])
       BS_CHECK(step.count == pipelineStages().size() && step.index < step.count);
     });
     BS_CHECK_MSG(first.registered, first.outcome);
-    BS_CHECK(first.outcome == "registered" && first.number == 1 && first.outputDir == root / "session" / "scan-01");
+    BS_CHECK(first.outcome == "registered" && first.failure.empty() && first.number == 1 && first.outputDir == root / "session" / "scan-01");
     std::vector<std::string> expected;
     for (const PipelineStage& stage : pipelineStages()) expected.push_back(stage.name);
     BS_CHECK(started == expected);
@@ -112,7 +112,8 @@ int IntraoperativeUpdateLogicTest(int, char*[])
     const fs::path broken = root / "broken.nii";
     std::ofstream(broken) << "not an image";
     const ScanUpdate failed = session.update(broken, "test");
-    BS_CHECK(!failed.registered && failed.outcome.rfind("failed: ", 0) == 0 && failed.outcome.find("broken.nii") != std::string::npos);
+    BS_CHECK(!failed.registered && failed.outcome.rfind("failed: ", 0) == 0 && failed.outcome.find("broken.nii") != std::string::npos &&
+             failed.outcome == "failed: " + failed.failure);
     BS_CHECK(failed.trust == "not assessed");
     BS_CHECK(session.previousScanFolder() == first.outputDir);
 
@@ -120,7 +121,7 @@ int IntraoperativeUpdateLogicTest(int, char*[])
     const ScanUpdate cancelled = session.update(files.intraopImage, "test", [&](const UpdateProgress& step) {
       if (step.stage == "classify" && step.message.empty()) session.cancel();
     });
-    BS_CHECK_MSG(cancelled.cancelled && cancelled.outcome == "cancelled", cancelled.outcome);
+    BS_CHECK_MSG(cancelled.cancelled && cancelled.outcome == "cancelled" && cancelled.failure == "cancelled", cancelled.outcome);
     BS_CHECK(!fs::exists(cancelled.outputDir / "scene.mrml"));
     BS_CHECK(session.previousScanFolder() == first.outputDir);
 
