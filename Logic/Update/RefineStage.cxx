@@ -73,6 +73,41 @@ DisplacementChange changeBetween(const std::map<vtkIdType, std::array<double, 3>
   return change;
 }
 
+/// The confidence map with the last pass's disagreement in it: each imposed node whose imposed
+/// displacement changed between the last two passes is evidence, misfit by that change, beside the
+/// solve's own (DisplacementUncertainty.h: the local root mean square misfit around a node). Where
+/// the passes disagree, neither is known better than by their difference. Returns the nodes added.
+std::size_t addPassDisagreementToUncertainty(RunContext& context, const std::map<vtkIdType, std::array<double, 3>>& before,
+                                             const std::map<vtkIdType, std::array<double, 3>>& after)
+{
+  if (!context.solveEvidence()) return 0;
+  const fs::path meshFile = context.output("mesh.vtu");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
+  vtkDataArray* displacement = mesh ? mesh->GetPointData()->GetArray("Displacement") : nullptr;
+  vtkDataArray* uncertainty = mesh ? mesh->GetPointData()->GetArray("DisplacementUncertainty") : nullptr;
+  if (!displacement || !uncertainty) return 0;
+  DisplacementEvidence evidence = *context.solveEvidence();
+  std::size_t added = 0;
+  for (const auto& [node, u] : after) {
+    const auto found = before.find(node);
+    if (found == before.end() || node < 0 || node >= mesh->GetNumberOfPoints()) continue;
+    double x[3];
+    mesh->GetPoint(node, x);
+    evidence.misfitPoints.push_back({x[0], x[1], x[2]});
+    evidence.misfitsMm.push_back(std::hypot(u[0] - found->second[0], u[1] - found->second[1], u[2] - found->second[2]));
+    ++added;
+  }
+  std::vector<double> nodes(3 * std::size_t(mesh->GetNumberOfPoints())), displacements(nodes.size());
+  for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) {
+    mesh->GetPoint(i, &nodes[3 * std::size_t(i)]);
+    displacement->GetTuple(i, &displacements[3 * std::size_t(i)]);
+  }
+  const std::vector<double> sigma = nodalDisplacementUncertainty(nodes, displacements, evidence);
+  for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) uncertainty->SetComponent(i, 0, sigma[std::size_t(i)]);
+  context.products().writeModel(mesh, meshFile);
+  return added;
+}
+
 struct WarpedPrior {
   LabelImage::Pointer labels; ///< the preoperative labels warped onto the intraoperative grid by the solve
   MaskImage::Pointer moved;   ///< within the reach of where the solve moved the tissue by more than MovedMm
@@ -109,16 +144,8 @@ std::pair<unsigned, std::string> refinementPasses(RunContext& context)
                      : std::pair<unsigned, std::string>{0, "auto: the scan's fluid is darker than its parenchyma"};
 }
 
-} // namespace
-
-void runRefineStage(RunContext& context)
+void requireEarlierStages(RunContext& context)
 {
-  Stopwatch clock;
-  const Configuration& configuration = context.configuration();
-  const auto [maximumPasses, passesFrom] = refinementPasses(context);
-  const double tolerance = configuration.classificationRefinementToleranceMm;
-  nlohmann::json passes = nlohmann::json::array();
-  bool settled = false;
   for (const auto& [needed, stage] : {std::pair<const char*, const char*>{"rigid_intraop_to_preop.tfm", "rigid"},
                                       {"intraop_labels.nii.gz", "classify"}, {"mesh.vtu", "mesh"},
                                       {"brain_surface.vtp", "surface"}}) {
@@ -127,54 +154,98 @@ void runRefineStage(RunContext& context)
       throw InputError(context.output(needed).string() + ": not found; run `brainshift " + stage + "` (and the stages after it) on this output folder first");
     }
   }
-  // The first classification (through the rigid prior) stays where the solve moved nothing.
-  const LabelImage::Pointer anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
-  // What the first pass did once for the whole scan stays said in its stages' entries.
-  const nlohmann::json firstSurface = context.report().hasStage("surface") ? context.report().stage("surface") : nlohmann::json::object();
-  const nlohmann::json firstSimulate = context.report().hasStage("simulate") ? context.report().stage("simulate") : nlohmann::json::object();
-  const nlohmann::json firstClassify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
-  const std::optional<bool> firstTumourDecision =
-    firstClassify.contains("tumour_resected") && firstClassify["tumour_resected"].is_boolean()
-      ? std::optional<bool>(firstClassify["tumour_resected"].get<bool>())
-      : std::nullopt;
-  auto keepFirstPassFacts = [&] {
-    nlohmann::json surface = context.report().stage("surface");
+}
+
+/// What the first pass found, which the refine passes keep: its classification where the solve
+/// moved nothing (the anchor), its tumour decision, and what it did once for the whole scan (the
+/// preoperative boundary's source and time, the worker's preparation), said again in the stages'
+/// entries each pass rewrites.
+struct FirstPass {
+  LabelImage::Pointer anchor;
+  std::optional<bool> tumourResected;
+  nlohmann::json surface, simulate;
+
+  explicit FirstPass(RunContext& context)
+  {
+    anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
+    auto stage = [&](const char* name) { return context.report().hasStage(name) ? context.report().stage(name) : nlohmann::json::object(); };
+    surface = stage("surface");
+    simulate = stage("simulate");
+    const nlohmann::json classify = stage("classify");
+    if (classify.contains("tumour_resected") && classify["tumour_resected"].is_boolean()) tumourResected = classify["tumour_resected"].get<bool>();
+  }
+  void restateIn(RunReport& report) const
+  {
+    nlohmann::json surfaceNow = report.stage("surface");
     for (const char* key : {"preop_boundary_from", "preop_boundary_seconds"}) {
-      if (firstSurface.contains(key)) surface[key] = firstSurface[key];
+      if (surface.contains(key)) surfaceNow[key] = surface[key];
     }
-    context.report().setStage("surface", surface);
-    nlohmann::json simulate = context.report().stage("simulate");
-    if (firstSimulate.value("worker_prepared", false)) simulate["worker_prepared"] = true;
-    context.report().setStage("simulate", simulate);
-  };
+    report.setStage("surface", surfaceNow);
+    nlohmann::json simulateNow = report.stage("simulate");
+    if (simulate.value("worker_prepared", false)) simulateNow["worker_prepared"] = true;
+    report.setStage("simulate", simulateNow);
+  }
+};
+
+struct PassOutcome {
+  DisplacementChange change;
+  std::size_t disagreementNodes = 0;
+  nlohmann::json entry;
+};
+
+/// One pass: the labels warped by the last solve as the prior, then classify, surface and simulate
+/// again; the imposed surface's change, into the confidence map too.
+PassOutcome runRefinePass(RunContext& context, unsigned pass, const FirstPass& first)
+{
+  Stopwatch passClock;
+  const double reachMm = context.configuration().classificationRefinementReachMm;
+  const auto before = imposedDisplacements(context, context.output("brain_surface.vtp"));
+  const WarpedPrior prior = labelsWarpedBySolve(context, reachMm);
+  context.setWarpedPrior(prior.labels, int(pass), reachMm > 0 ? prior.moved : nullptr, first.anchor, first.tumourResected);
+  const double priorSeconds = passClock.seconds();
+  runClassifyStage(context);
+  runSurfaceStage(context);
+  runSimulateStage(context);
+  first.restateIn(context.report());
+  const auto after = imposedDisplacements(context, context.output("brain_surface.vtp"));
+  PassOutcome outcome;
+  outcome.change = changeBetween(before, after);
+  outcome.disagreementNodes = addPassDisagreementToUncertainty(context, before, after);
+  const nlohmann::json& classify = context.report().stage("classify");
+  outcome.entry = {{"pass", pass},
+                   {"wall_seconds", passClock.seconds()},
+                   {"prior_seconds", priorSeconds},
+                   {"classify_seconds", classify["wall_seconds"]},
+                   {"surface_seconds", context.report().stage("surface")["wall_seconds"]},
+                   {"simulate_seconds", context.report().stage("simulate")["wall_seconds"]},
+                   {"tumour_resected", classify["tumour_resected"]},
+                   {"imposed_nodes", context.report().stage("surface")["imposed_nodes"]},
+                   {"mean_change_mm", outcome.change.meanMm},
+                   {"max_change_mm", outcome.change.maxMm},
+                   {"compared_nodes", outcome.change.nodes}};
+  context.say("refine pass %u: the imposed surface moved %.2f mm mean (%.2f max), %.2f s\n", pass, outcome.change.meanMm,
+              outcome.change.maxMm, passClock.seconds());
+  return outcome;
+}
+
+} // namespace
+
+void runRefineStage(RunContext& context)
+{
+  Stopwatch clock;
+  const auto [maximumPasses, passesFrom] = refinementPasses(context);
+  const double tolerance = context.configuration().classificationRefinementToleranceMm;
+  nlohmann::json passes = nlohmann::json::array();
+  bool settled = false;
+  std::size_t disagreementNodes = 0; // the last pass's, in the confidence map
+  requireEarlierStages(context);
+  const FirstPass first(context);
   try {
     for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
-      Stopwatch passClock;
-      const auto before = imposedDisplacements(context, context.output("brain_surface.vtp"));
-      const WarpedPrior prior = labelsWarpedBySolve(context, configuration.classificationRefinementReachMm);
-      context.setWarpedPrior(prior.labels, int(pass), configuration.classificationRefinementReachMm > 0 ? prior.moved : nullptr, anchor,
-                             firstTumourDecision);
-      const double priorSeconds = passClock.seconds();
-      runClassifyStage(context);
-      runSurfaceStage(context);
-      runSimulateStage(context);
-      keepFirstPassFacts();
-      const DisplacementChange change = changeBetween(before, imposedDisplacements(context, context.output("brain_surface.vtp")));
-      settled = change.meanMm < tolerance;
-      const nlohmann::json& classify = context.report().stage("classify");
-      passes.push_back({{"pass", pass},
-                        {"wall_seconds", passClock.seconds()},
-                        {"prior_seconds", priorSeconds},
-                        {"classify_seconds", classify["wall_seconds"]},
-                        {"surface_seconds", context.report().stage("surface")["wall_seconds"]},
-                        {"simulate_seconds", context.report().stage("simulate")["wall_seconds"]},
-                        {"tumour_resected", classify["tumour_resected"]},
-                        {"imposed_nodes", context.report().stage("surface")["imposed_nodes"]},
-                        {"mean_change_mm", change.meanMm},
-                        {"max_change_mm", change.maxMm},
-                        {"compared_nodes", change.nodes}});
-      context.say("refine pass %u: the imposed surface moved %.2f mm mean (%.2f max), %.2f s\n", pass, change.meanMm,
-                  change.maxMm, passClock.seconds());
+      const PassOutcome outcome = runRefinePass(context, pass, first);
+      settled = outcome.change.meanMm < tolerance;
+      disagreementNodes = outcome.disagreementNodes;
+      passes.push_back(outcome.entry);
       context.report().save();
     }
   } catch (...) {
@@ -186,6 +257,7 @@ void runRefineStage(RunContext& context)
                                        {"passes", passes.size()},
                                        {"maximum_passes", maximumPasses},
                                        {"passes_from", passesFrom},
+                                       {"uncertainty_disagreement_nodes", disagreementNodes},
                                        {"tolerance_mm", tolerance},
                                        {"settled", settled || maximumPasses == 0},
                                        {"per_pass", passes}});

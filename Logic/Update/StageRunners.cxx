@@ -412,6 +412,7 @@ void runSimulateStage(RunContext& context)
   }
   attachDisplacements(mesh, result);
   attachUncertainty(mesh, job, result, evidence);
+  context.setSolveEvidence(evidence);
   context.products().writeModel(mesh, meshFile);
   context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},
                                          {"served", served},

@@ -7,6 +7,7 @@
 // (IntraoperativeUpdateLogic.h drives a session of scans).
 #include "BrainShiftErrors.h"
 #include "Configuration.h"
+#include "DisplacementUncertainty.h"
 #include "DistanceMaps.h"
 #include "FiniteElementSolver.h"
 #include "RigidRegistrationLogic.h"
@@ -141,6 +142,10 @@ public:
     firstTumourDecision_ = tumourResected;
   }
   std::optional<bool> firstTumourDecision() const { return firstTumourDecision_; }
+  /// The evidence behind the last solve of this run (its imposed nodes and matches, with their
+  /// misfits): the confidence map's, which the refine stage adds its passes' disagreement to.
+  void setSolveEvidence(DisplacementEvidence evidence) { solveEvidence_ = std::move(evidence); }
+  const std::optional<DisplacementEvidence>& solveEvidence() const { return solveEvidence_; }
   const LabelImage* warpedPrior() const { return warpedPrior_.GetPointer(); }
   int warpedPriorPass() const { return warpedPriorPass_; }
   const MaskImage* movedByPrior() const { return movedByPrior_.GetPointer(); }
@@ -165,6 +170,7 @@ private:
   LabelImage::Pointer anchorLabels_;
   std::optional<bool> firstTumourDecision_;
   StageProducts products_;
+  std::optional<DisplacementEvidence> solveEvidence_;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
