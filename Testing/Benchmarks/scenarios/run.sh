@@ -7,8 +7,9 @@
 #                pass only where the scan's fluid is brighter than its parenchyma (refinement "auto")
 #   refined      the refine stage on (classification.refinement_passes 2): it reclassifies with the
 #                preoperative labels warped by the solve, and solves again
-#   true-labels  the true intraoperative labels instead of the classification: the ceiling of a
-#                surface-driven model (rigid, then the truth's labels, mesh, surface, simulate, warp)
+#   true-labels  the true intraoperative labels instead of the classification: the ceiling of the
+#                update given a perfect segmentation (rigid, then the truth's labels, mesh, surface,
+#                simulate with the images, so with block matching as by default, warp)
 # and, with ELASTIX=1, elastix rigid + B-spline on the same images (update/elastix.py; ELASTIX_SCENARIOS
 # limits it to the named scenarios: it takes about 70 s a case).
 #
@@ -66,7 +67,7 @@ for scenario in "${scenarios[@]}"; do
           cp "$case_dir/truth/intraop_labels.nii.gz" "$folder/intraop_labels.nii.gz" &&
           "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$folder" &&
           "$brainshift" surface --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$folder" &&
-          "$brainshift" simulate --output-dir "$folder" &&
+          "$brainshift" simulate "${inputs[@]}" &&
           "$brainshift" warp "${inputs[@]}"
         } > "$folder.log" 2>&1 || say "$scenario/$variant: exit $? (see $folder.log)"
         "$brainshift" evaluate --transform "$folder/intraop_to_preop.h5" --landmarks "$case_dir/landmarks.csv" \
