@@ -3,8 +3,9 @@
 // between the stages of a run. A later stage of the same run takes the label volume or the model
 // from here instead of reading its file back (the file is still written: it is the output). Each
 // entry remembers the file's size and modification time as the stage left it; a file changed since
-// (by another program, or a stage run alone in another process) is read again. What is given out is
-// a copy: a stage may change it freely.
+// (by another program, or a stage run alone in another process) is read again; a rewrite within
+// one tick of the file system's clock that keeps the size is not noticed (the stages themselves
+// write through here). What is given out is a copy: a stage may change it freely.
 #include "ImageTypes.h"
 
 #include <vtkPointSet.h>
