@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <initializer_list>
+#include <limits>
 #include <set>
 #include <sstream>
 #include <utility>
@@ -38,6 +39,19 @@ double number(const json& value, const std::string& where)
 {
   if (!value.is_number()) throw InputError(where + ": a number is expected, not " + value.dump());
   return value.get<double>();
+}
+
+bool isWholeNumberFrom(const json& value, long long minimum)
+{
+  return value.is_number_integer() && value.get<long long>() >= minimum &&
+         value.get<long long>() <= static_cast<long long>(std::numeric_limits<unsigned>::max());
+}
+
+/// A whole number of at least `minimum` (InputError "`where` must be a whole number >= minimum").
+unsigned wholeNumber(const json& value, long long minimum, const std::string& where)
+{
+  if (!isWholeNumberFrom(value, minimum)) throw InputError(where + " must be a whole number >= " + std::to_string(minimum));
+  return static_cast<unsigned>(value.get<long long>());
 }
 /// The label number a "materials" key names, or -1.
 int labelOfKey(const std::string& key)
@@ -142,7 +156,7 @@ void readClassification(const json& c, const std::string& file, Configuration& c
     const json& passes = c["refinement_passes"];
     if (passes.is_string() && passes.get<std::string>() == "auto") {
       configuration.classificationRefinementPasses.reset();
-    } else if (passes.is_number_integer() && passes.get<int>() >= 0) {
+    } else if (isWholeNumberFrom(passes, 0)) {
       configuration.classificationRefinementPasses = passes.get<unsigned>();
     } else {
       throw InputError(file + ": classification.refinement_passes must be \"auto\" or a whole number >= 0");
@@ -154,10 +168,7 @@ void readClassification(const json& c, const std::string& file, Configuration& c
   if (c.contains("refinement_tolerance_mm")) {
     configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
   }
-  if (c.contains("k")) {
-    if (!c["k"].is_number_integer() || c["k"].get<int>() < 1) throw InputError(file + ": classification.k must be a whole number >= 1");
-    configuration.classificationK = c["k"].get<unsigned>();
-  }
+  if (c.contains("k")) configuration.classificationK = wholeNumber(c["k"], 1, file + ": classification.k");
   if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
   readFlags(c, {{"bias_correction", &configuration.classificationBiasCorrection},
                 {"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
@@ -170,12 +181,7 @@ void readRigid(const json& c, const std::string& file, Configuration& configurat
   if (!c.is_object()) throw InputError(file + ": \"rigid\" must be an object");
   requireKnownKeys(c, {"sampling", "levels"}, file + ": rigid");
   if (c.contains("sampling")) configuration.rigidSamplingFraction = number(c["sampling"], file + ": rigid.sampling");
-  if (c.contains("levels")) {
-    if (!c["levels"].is_number_integer() || c["levels"].get<long>() < 1) {
-      throw InputError(file + ": rigid.levels must be a whole number >= 1");
-    }
-    configuration.rigidLevels = c["levels"].get<unsigned>();
-  }
+  if (c.contains("levels")) configuration.rigidLevels = wholeNumber(c["levels"], 1, file + ": rigid.levels");
 }
 
 void readSurface(const json& c, const std::string& file, Configuration& configuration)
@@ -191,10 +197,7 @@ void readSurface(const json& c, const std::string& file, Configuration& configur
   if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
   if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");
   if (c.contains("max_iterations")) {
-    if (!c["max_iterations"].is_number_integer() || c["max_iterations"].get<long>() < 1) {
-      throw InputError(file + ": surface.max_iterations must be a whole number >= 1");
-    }
-    configuration.surfaceMaximumIterations = c["max_iterations"].get<unsigned>();
+    configuration.surfaceMaximumIterations = wholeNumber(c["max_iterations"], 1, file + ": surface.max_iterations");
   }
 }
 

@@ -138,8 +138,13 @@ std::pair<unsigned, std::string> refinementPasses(RunContext& context)
 {
   const std::optional<unsigned> configured = context.configuration().classificationRefinementPasses;
   if (configured) return {*configured, "configured"};
+  // What the first classification learned of this scan's contrast (its prototypes' medians), as
+  // ScanContrast::fluidBrighterThanParenchyma decides it.
   const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
-  const bool fluidBright = classify.contains("contrast") && classify["contrast"].value("fluid", "") == "brighter than the parenchyma";
+  const nlohmann::json contrast = classify.value("contrast", nlohmann::json::object());
+  const bool known = contrast.contains("fluid_median") && contrast["fluid_median"].is_number() &&
+                     contrast.contains("parenchyma_median") && contrast["parenchyma_median"].is_number();
+  const bool fluidBright = known && contrast["fluid_median"].get<double>() > contrast["parenchyma_median"].get<double>();
   return fluidBright ? std::pair<unsigned, std::string>{1, "auto: the scan's fluid is brighter than its parenchyma"}
                      : std::pair<unsigned, std::string>{0, "auto: the scan's fluid is darker than its parenchyma"};
 }

@@ -79,6 +79,10 @@ int ConfigurationTest(int, char*[])
     refused(R"({"classification": {"refinement_passes": "always"}})", "classification.refinement_passes must be \"auto\"");
     refused(R"({"classification": {"refinement_passes": -1}})", "classification.refinement_passes");
     refused(R"({"classification": {"refinement_passes": 11}})", "refinement passes 11 is outside 0 to 10");
+    refused(R"({"classification": {"refinement_passes": 4294967296}})", "classification.refinement_passes must be");
+    refused(R"({"classification": {"k": 0}})", "classification.k must be a whole number >= 1");
+    refused(R"({"rigid": {"levels": 2.5}})", "rigid.levels must be a whole number >= 1");
+    refused(R"({"surface": {"max_iterations": -3}})", "surface.max_iterations must be a whole number >= 1");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
