@@ -1,7 +1,5 @@
 #include "BlockMatching.h"
 
-#include "DistanceMaps.h"
-
 #include <itkIdentityTransform.h>
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkNearestNeighborInterpolateImageFunction.h>
@@ -17,6 +15,33 @@
 #include <thread>
 
 namespace brainshift {
+
+// The depth is the distance to the nearest boundary voxel (a brain voxel with a non-brain voxel
+// among its 26 neighbours), the zero level of ITK's signed Maurer distance. A ball about a brain
+// centre that holds a non-brain voxel holds such a boundary voxel too (the path towards the centre
+// crosses one), so "every offset brain" is "no boundary voxel nearer than depthMm".
+std::vector<std::array<int, 3>> depthTestOffsets(const std::array<double, 3>& spacing, double depthMm)
+{
+  std::array<int, 3> reach{};
+  for (std::size_t a = 0; a < 3; ++a) reach[a] = int(std::ceil(depthMm / spacing[a])) + 1;
+  std::vector<std::array<int, 3>> neighbour; // the voxel itself and its 26 neighbours
+  for (int c = -1; c <= 1; ++c)
+    for (int b = -1; b <= 1; ++b)
+      for (int a = -1; a <= 1; ++a) neighbour.push_back({a, b, c});
+  std::vector<std::array<int, 3>> offsets;
+  for (int z = -reach[2]; z <= reach[2]; ++z)
+    for (int y = -reach[1]; y <= reach[1]; ++y)
+      for (int x = -reach[0]; x <= reach[0]; ++x) {
+        bool reached = false;
+        for (const auto& f : neighbour) {
+          const double dx = (x - f[0]) * spacing[0], dy = (y - f[1]) * spacing[1], dz = (z - f[2]) * spacing[2];
+          reached = reached || dx * dx + dy * dy + dz * dz < depthMm * depthMm;
+        }
+        if (reached) offsets.push_back({x, y, z});
+      }
+  return offsets;
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -50,30 +75,44 @@ struct Volume {
   }
 };
 
-/// The matching grid: the preoperative image's axes, no finer than the grid spacing, over the
-/// brain and a margin for the search.
-ScalarImage::Pointer matchingGrid(const ScalarImage& preopImage, const LabelImage& preopLabels, const BlockMatchingParameters& p)
+/// The brain's extent in the preoperative image's continuous indices (low > high: no brain). On
+/// the image's own grid (the usual case) the labels' index box, else every brain voxel mapped.
+void brainExtentInImage(const ScalarImage& preopImage, const LabelImage& preopLabels, const BlockMatchingParameters& p,
+                        std::array<double, 3>& low, std::array<double, 3>& high)
 {
-  std::array<double, 3> low{1e30, 1e30, 1e30}, high{-1e30, -1e30, -1e30};
-  const auto region = preopLabels.GetLargestPossibleRegion();
+  low = {1e30, 1e30, 1e30};
+  high = {-1e30, -1e30, -1e30};
+  const bool sameGrid = ImageGeometry::of(&preopLabels).sameGridAs(ImageGeometry::of(&preopImage));
   const LabelPixel* labels = preopLabels.GetBufferPointer();
-  const auto size = region.GetSize();
+  const auto size = preopLabels.GetLargestPossibleRegion().GetSize();
   std::size_t n = 0;
   for (std::size_t k = 0; k < size[2]; ++k) {
     for (std::size_t j = 0; j < size[1]; ++j) {
       for (std::size_t i = 0; i < size[0]; ++i, ++n) {
         if (std::find(p.brainLabels.begin(), p.brainLabels.end(), int(labels[n])) == p.brainLabels.end()) continue;
-        PhysicalPoint x;
-        preopLabels.TransformIndexToPhysicalPoint({{itk::IndexValueType(i), itk::IndexValueType(j), itk::IndexValueType(k)}}, x);
-        // In the image's own axes: the grid is aligned with them.
-        const auto index = preopImage.TransformPhysicalPointToContinuousIndex<double>(x);
-        for (int d = 0; d < 3; ++d) {
-          low[std::size_t(d)] = std::min(low[std::size_t(d)], index[d]);
-          high[std::size_t(d)] = std::max(high[std::size_t(d)], index[d]);
+        std::array<double, 3> index{double(i), double(j), double(k)};
+        if (!sameGrid) {
+          PhysicalPoint x;
+          preopLabels.TransformIndexToPhysicalPoint({{itk::IndexValueType(i), itk::IndexValueType(j), itk::IndexValueType(k)}}, x);
+          // In the image's own axes: the grid is aligned with them.
+          const auto c = preopImage.TransformPhysicalPointToContinuousIndex<double>(x);
+          index = {c[0], c[1], c[2]};
+        }
+        for (std::size_t d = 0; d < 3; ++d) {
+          low[d] = std::min(low[d], index[d]);
+          high[d] = std::max(high[d], index[d]);
         }
       }
     }
   }
+}
+
+/// The matching grid: the preoperative image's axes, no finer than the grid spacing, over the
+/// brain and a margin for the search.
+ScalarImage::Pointer matchingGrid(const ScalarImage& preopImage, const LabelImage& preopLabels, const BlockMatchingParameters& p)
+{
+  std::array<double, 3> low{}, high{};
+  brainExtentInImage(preopImage, preopLabels, p, low, high);
   if (low[0] > high[0]) return nullptr; // no brain
   const auto spacing = preopImage.GetSpacing();
   ScalarImage::Pointer grid = ScalarImage::New();
@@ -411,19 +450,27 @@ MatchingVolumes prepareVolumes(const ScalarImage& preopImage, const LabelImage& 
   return v;
 }
 
+/// Whether the centre and every offset from it are brain (false where an offset leaves the grid).
+bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vector<std::array<int, 3>>& offsets)
+{
+  const auto& size = v.remapped.size;
+  for (const auto& o : offsets) {
+    const int x = i + o[0], y = j + o[1], z = k + o[2];
+    if (x < 0 || y < 0 || z < 0 || x >= size[0] || y >= size[1] || z >= size[2]) return false;
+    if (!v.preopBrain[v.remapped.at(x, y, z)]) return false;
+  }
+  return true;
+}
+
 /// Lattice centres (every `stride` voxels) deep in the brain whose block holds no excluded tissue,
 /// the most structured share of them (variance of the remapped block) first. `found`: how many
 /// qualified before the share and the limit.
 std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h, int stride, const BlockMatchingParameters& parameters,
                                                  std::size_t& found)
 {
-  MaskImage::Pointer mask = MaskImage::New();
-  mask->CopyInformation(v.grid);
-  mask->SetRegions(v.grid->GetLargestPossibleRegion());
-  mask->Allocate();
-  std::copy(v.preopBrain.begin(), v.preopBrain.end(), mask->GetBufferPointer());
-  const ScalarImage::Pointer distance = signedDistanceMm(mask);
-  const float* signedDistance = distance->GetBufferPointer();
+  const auto gridSpacing = v.grid->GetSpacing();
+  const std::vector<std::array<int, 3>> depthOffsets =
+    depthTestOffsets({gridSpacing[0], gridSpacing[1], gridSpacing[2]}, parameters.minimumDepthMm);
   const Volume<float>& image = v.remapped;
   auto excludedAt = [&](std::size_t at) {
     const auto& excluded = parameters.excludedLabels;
@@ -433,7 +480,7 @@ std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h
   for (int k = h + 1; k + h + 1 < image.size[2]; k += stride)
     for (int j = h + 1; j + h + 1 < image.size[1]; j += stride)
       for (int i = h + 1; i + h + 1 < image.size[0]; i += stride) {
-        if (-signedDistance[image.at(i, j, k)] < parameters.minimumDepthMm) continue;
+        if (!v.preopBrain[image.at(i, j, k)] || !deepInBrain(v, i, j, k, depthOffsets)) continue;
         bool excluded = false;
         double sum = 0, squares = 0, n = 0;
         for (int z = k - h; z <= k + h && !excluded; ++z)

@@ -889,39 +889,95 @@ SpatialTransform::Pointer wholeMappingTransform(const DisplacementFieldImage& fi
   return SpatialTransform::Pointer(composite.GetPointer());
 }
 
-/// The mapping shown, as a field, a transform file and warped volumes, then the scene that points
-/// at them. The compressed volumes are written on a second thread while this one writes the field
-/// and the transform (HDF5, which is not thread-safe, stays on this thread alone).
-void writeWarpOutputs(RunContext& context, const DisplacementFieldImage::Pointer& field, const ScalarImage::Pointer& warpedImage,
-                      const LabelImage::Pointer& warpedLabels, const SpatialTransform::Pointer& rigid, bool rigidFallback,
-                      const ScalarImage::Pointer& uncertainty)
-{
-  std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars{
-    {"warped preop image", context.output("warped_preop_image.nii.gz"), warpedImage}};
-  if (uncertainty) scalars.emplace_back(UncertaintyMapName, context.output("displacement_uncertainty_mm.nii.gz"), uncertainty);
-  for (const LoadedOverlay& overlay : context.overlays()) {
-    scalars.emplace_back("warped " + overlay.name, context.output("warped_" + overlay.name + ".nii.gz"),
-                         warpScalarVolume(*overlay.image, *field));
+/// The files of the mapping shown, as a field, a transform file and warped volumes; the scene's
+/// names for the volumes and their file names.
+struct WarpFiles {
+  std::vector<std::tuple<std::string, std::string, ScalarImage::Pointer>> scalars; ///< name, file name, volume
+  std::string labelsFileName = "warped_preop_labels.nii.gz";
+  SpatialTransform::Pointer composite; ///< the whole mapping, as intraop_to_preop.h5 holds it
+  std::vector<std::string> fileNames() const
+  {
+    std::vector<std::string> names{"displacement_intraop_to_preop.nrrd", "intraop_to_preop.h5", labelsFileName};
+    for (const auto& scalar : scalars) names.push_back(std::get<1>(scalar));
+    return names;
   }
-  const fs::path warpedLabelsFile = context.output("warped_preop_labels.nii.gz");
-  std::future<void> volumesWritten = std::async(std::launch::async, [&scalars, &warpedLabels, &warpedLabelsFile] {
-    for (const auto& [name, file, image] : scalars) writeScalarVolume(image, file);
-    writeLabelVolume(warpedLabels, warpedLabelsFile);
+};
+
+/// Writes the mapping's files into `folder`. Touches no run context: it may run beside the trust
+/// assessment. The compressed volumes are written on a second thread while this one writes the
+/// field and the transform (HDF5, which is not thread-safe, stays on this thread alone).
+WarpFiles writeWarpFiles(const fs::path& folder, const std::vector<LoadedOverlay>& overlays, const DisplacementFieldImage::Pointer& field,
+                         const ScalarImage::Pointer& warpedImage, const LabelImage::Pointer& warpedLabels,
+                         const SpatialTransform::Pointer& rigid, const ScalarImage::Pointer& uncertainty)
+{
+  WarpFiles files;
+  files.scalars.emplace_back("warped preop image", "warped_preop_image.nii.gz", warpedImage);
+  if (uncertainty) files.scalars.emplace_back(UncertaintyMapName, "displacement_uncertainty_mm.nii.gz", uncertainty);
+  for (const LoadedOverlay& overlay : overlays) {
+    files.scalars.emplace_back("warped " + overlay.name, "warped_" + overlay.name + ".nii.gz", warpScalarVolume(*overlay.image, *field));
+  }
+  std::future<void> volumesWritten = std::async(std::launch::async, [&files, &warpedLabels, &folder] {
+    for (const auto& [name, file, image] : files.scalars) writeScalarVolume(image, folder / file);
+    writeLabelVolume(warpedLabels, folder / files.labelsFileName);
   });
-  SpatialTransform::Pointer composite;
   try {
-    writeDisplacementField(field, context.output("displacement_intraop_to_preop.nrrd"));
-    composite = wholeMappingTransform(*field, *rigid);
-    writeTransform(composite, context.output("intraop_to_preop.h5"));
+    writeDisplacementField(field, folder / "displacement_intraop_to_preop.nrrd");
+    files.composite = wholeMappingTransform(*field, *rigid);
+    writeTransform(files.composite, folder / "intraop_to_preop.h5");
   } catch (...) {
     volumesWritten.wait(); // the thread's references must outlive it
     throw;
   }
   volumesWritten.get();
+  return files;
+}
+
+/// A folder beside the outputs where the update's files wait while the trust assessment judges
+/// the update (written meanwhile, on other threads): moved into place when it is shown, removed
+/// when the rigid result stands in for it, and removed whatever happens when the stage ends.
+class StagingFolder {
+public:
+  explicit StagingFolder(fs::path folder)
+    : folder_(std::move(folder))
+  {
+    std::error_code ec;
+    fs::remove_all(folder_, ec); // a run killed before it could clean up
+    fs::create_directories(folder_, ec);
+    if (ec) throw MethodError("cannot create " + folder_.string() + ": " + ec.message());
+  }
+  ~StagingFolder()
+  {
+    std::error_code ec;
+    fs::remove_all(folder_, ec);
+  }
+  StagingFolder(const StagingFolder&) = delete;
+  StagingFolder& operator=(const StagingFolder&) = delete;
+  const fs::path& path() const { return folder_; }
+  /// Each file moved onto its place in `outputDir` (a rename in the same folder tree: atomic).
+  void publish(const std::vector<std::string>& fileNames, const fs::path& outputDir) const
+  {
+    for (const std::string& name : fileNames) {
+      std::error_code ec;
+      fs::rename(folder_ / name, outputDir / name, ec);
+      if (ec) throw MethodError("cannot move " + (folder_ / name).string() + " onto " + (outputDir / name).string() + ": " + ec.message());
+    }
+  }
+
+private:
+  fs::path folder_;
+};
+
+/// The scene that points at the mapping's files (in the output folder).
+void writeWarpScene(RunContext& context, const WarpFiles& files, const LabelImage::Pointer& warpedLabels,
+                    const SpatialTransform::Pointer& rigid, bool rigidFallback)
+{
+  std::vector<std::tuple<std::string, fs::path, ScalarImage::Pointer>> scalars;
+  for (const auto& [name, file, image] : files.scalars) scalars.emplace_back(name, context.output(file), image);
   const fs::path surfaceFile = context.output("brain_surface.vtp");
   vtkSmartPointer<vtkPolyData> brainSurface = vtkPolyData::SafeDownCast(context.products().readModel(surfaceFile));
   if (!brainSurface) throw InputError(surfaceFile.string() + ": not a surface (vtkPolyData)");
-  writeUpdateScene(context, scalars, warpedLabelsFile, warpedLabels, rigid, composite, brainSurface, rigidFallback);
+  writeUpdateScene(context, scalars, context.output(files.labelsFileName), warpedLabels, rigid, files.composite, brainSurface,
+                   rigidFallback);
 }
 
 /// A rejected update is kept aside, for whoever must see what was set aside (and for the
@@ -985,18 +1041,11 @@ WarpInputs readWarpInputs(RunContext& context)
   return inputs;
 }
 
-/// The confidence map describes the update: none (and an earlier run's removed) when the rigid
-/// result stands in for it.
-ScalarImage::Pointer updateUncertainty(RunContext& context, const WarpInputs& inputs, const DeformationField& deformation,
-                                       bool rigidFallback, nlohmann::json& entry)
+/// The confidence map of the update, made before the trust assessment has judged it (the files
+/// are written meanwhile); dropped, with an earlier run's file, when the rigid result stands in.
+ScalarImage::Pointer updateUncertainty(const WarpInputs& inputs, const DeformationField& deformation, nlohmann::json& entry)
 {
-  const ScalarImage::Pointer uncertainty =
-    rigidFallback ? nullptr : uncertaintyOnScan(inputs.mesh, *deformation.field, inputs.meshFile.string(), entry);
-  if (rigidFallback) {
-    std::error_code ec;
-    fs::remove(context.output("displacement_uncertainty_mm.nii.gz"), ec);
-  }
-  return uncertainty;
+  return uncertaintyOnScan(inputs.mesh, *deformation.field, inputs.meshFile.string(), entry);
 }
 
 struct WarpSeconds {
@@ -1031,7 +1080,7 @@ void reportWarpStage(RunContext& context, const DeformationField& deformation, b
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
                                   " voxels where the deformation folds (Jacobian determinant <= 0)"});
   }
-  context.say("warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s\n",
+  context.say("warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s more\n",
               deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, seconds.field, seconds.warp, seconds.trust,
               seconds.write);
 }
@@ -1046,7 +1095,7 @@ void runWarpStage(RunContext& context)
   const ScalarImage& intraop = context.intraopImage("warp");
   const ScalarImage& preopImage = context.preopImage("warp");
   const LabelImage& preopLabels = context.preopLabels("warp");
-  context.overlays();
+  const std::vector<LoadedOverlay>& overlays = context.overlays();
   seconds.read = clock.seconds();
 
   Stopwatch fieldClock;
@@ -1063,17 +1112,34 @@ void runWarpStage(RunContext& context)
 
   // Never a deformed image worse than the rigid one without a word: a rejected update gives way
   // to the rigid result in every file, and the command fails with the reason once they are written.
+  // The update's files are written into a staging folder while the trust assessment judges it (the
+  // two share the machine's cores), and moved into place only when it is shown.
+  nlohmann::json uncertaintyEntry = nullptr;
+  const ScalarImage::Pointer uncertainty = updateUncertainty(inputs, deformation, uncertaintyEntry);
+  Stopwatch writeClock;
+  const StagingFolder staging(context.output(".warp-staging"));
+  std::future<WarpFiles> updateFiles = std::async(std::launch::async, [&] {
+    return writeWarpFiles(staging.path(), overlays, deformation.field, warpedImage, warpedLabels, rigid, uncertainty);
+  });
   Stopwatch trustClock;
   const NonrigidUpdateTrustAssessment trust = assessUpdate(context, intraop, deformation, *warpedImage, *warpedLabels, rigidOnly);
   seconds.trust = trustClock.seconds();
   const bool rigidFallback = trust.trust == UpdateTrust::Rejected;
-  nlohmann::json uncertaintyEntry = nullptr;
-  const ScalarImage::Pointer uncertainty = updateUncertainty(context, inputs, deformation, rigidFallback, uncertaintyEntry);
-  Stopwatch writeClock;
-  writeWarpOutputs(context, rigidFallback ? rigidOnly.field : deformation.field, rigidFallback ? rigidOnly.image : warpedImage,
-                   rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback, uncertainty);
+  WarpFiles shown;
+  if (!rigidFallback) {
+    shown = updateFiles.get();
+    staging.publish(shown.fileNames(), context.options().outputDir);
+  } else {
+    updateFiles.wait(); // set aside, whatever became of it
+    uncertaintyEntry = nullptr;
+    std::error_code ec;
+    fs::remove(context.output("displacement_uncertainty_mm.nii.gz"), ec);
+    shown = writeWarpFiles(context.options().outputDir, overlays, rigidOnly.field, rigidOnly.image, rigidOnly.labels, rigid,
+                           nullptr);
+  }
+  writeWarpScene(context, shown, rigidFallback ? rigidOnly.labels : warpedLabels, rigid, rigidFallback);
   keepRejectedUpdate(context, deformation.field, *rigid, rigidFallback);
-  seconds.write = writeClock.seconds();
+  seconds.write = std::max(0.0, writeClock.seconds() - seconds.trust); // beyond the assessment, which it overlaps
   reportWarpStage(context, deformation, rigidFallback, clock.seconds(), seconds, uncertaintyEntry, trust);
   reportTrust(context, trust);
 }

@@ -392,7 +392,7 @@ WarpStage)
 TrustAssessment)
   # The demo's update is trusted; an update built on a segmentation moved 7.5 mm is worse than the
   # rigid registration and is rejected: exit 1, every file holds the rigid transform, the report
-  # and the scene say so, the update set aside is kept.
+  # and the scene say so, the update set aside is kept, nothing of the update is published.
   out=$work/trust
   rm -rf "$out" && mkdir -p "$out/good" "$out/damaged"
   P=$case_dir/preop_image.nii.gz L=$case_dir/preop_labels.nii.gz I=$case_dir/intraop_image.nii.gz
@@ -432,6 +432,14 @@ TrustAssessment)
   float_check "$out/intraop_to_preop.h5.json" "['mean_mm']" "- $rigid_tre > -0.01"
   float_check "$out/displacement_intraop_to_preop.nrrd.json" "['mean_mm']" "- $rigid_tre < 0.01"
   float_check "$out/rejected_intraop_to_preop.h5.json" "['mean_mm']" "> $rigid_tre + 1"
+  # The update's files wait in a staging folder while the assessment runs: none is left behind, and
+  # the rejected update's confidence map is not published.
+  for d in good damaged; do
+    [ -e "$out/$d/.warp-staging" ] && fail "$d: the warp's staging folder was left behind"
+    ls -a "$out/$d" | grep -q "^\.tmp-" && fail "$d: temporary files were left behind"
+  done
+  [ -s "$out/good/displacement_uncertainty_mm.nii.gz" ] || fail "the trusted update has no confidence map"
+  [ -e "$out/damaged/displacement_uncertainty_mm.nii.gz" ] && fail "the rejected update's confidence map was published"
   ;;
 DemoRefusesForeignFolder)
   out=$work/foreign
