@@ -16,4 +16,15 @@ ScalarImage::Pointer signedDistanceMm(const MaskImage* mask);
 /// that the zero level lies on the voxel faces, where the boundary is (matters on thick slices).
 ScalarImage::Pointer boundaryDistanceMm(const MaskImage* mask);
 
+/// The voxels at least `depthMm` inside the mask: signedDistanceMm(mask) <= -depthMm, found without
+/// a distance map (a voxel is that deep when no boundary voxel of the mask, one with a voxel of the
+/// complement among its 26 neighbours, lies nearer than depthMm). Cheap for masks far smaller than
+/// their grid, and for small depths. A mask touching the grid's edge: ITK sees no boundary there,
+/// this sees one (the outside counts as complement).
+MaskImage::Pointer voxelsAtLeastDeep(const MaskImage* mask, double depthMm);
+
+/// The voxels within `reachMm` of the mask: signedDistanceMm(mask) <= reachMm (the mask itself and
+/// the complement's voxels that close to a mask voxel), found without a distance map.
+MaskImage::Pointer voxelsWithin(const MaskImage* mask, double reachMm);
+
 } // namespace brainshift

@@ -899,23 +899,13 @@ MaskImage::Pointer fluidInBrain(const ClassificationWork& w, const TissueClassif
   return fluid;
 }
 
-/// The part of `fluid` thicker than P.fluidOpeningMm (a morphological opening by distance maps).
+/// The part of `fluid` thicker than P.fluidOpeningMm: a morphological opening (the voxels that
+/// deep, then the fluid within that reach of them: the distance maps' tests, without the maps).
 MaskImage::Pointer thickPartOf(const ClassificationWork& w, const MaskImage::Pointer& fluid)
 {
-  ScalarImage::Pointer toFluid = signedDistanceMm(fluid);
-  auto core = MaskImage::New();
-  core->CopyInformation(fluid);
-  core->SetRegions(fluid->GetLargestPossibleRegion());
-  core->Allocate();
-  for (std::size_t i = 0; i < w.N; ++i) core->GetBufferPointer()[i] = toFluid->GetBufferPointer()[i] <= -w.P.fluidOpeningMm;
-  ScalarImage::Pointer toCore = signedDistanceMm(core);
-  auto thick = MaskImage::New();
-  thick->CopyInformation(fluid);
-  thick->SetRegions(fluid->GetLargestPossibleRegion());
-  thick->Allocate();
-  for (std::size_t i = 0; i < w.N; ++i) {
-    thick->GetBufferPointer()[i] = fluid->GetBufferPointer()[i] && toCore->GetBufferPointer()[i] <= w.P.fluidOpeningMm + 1e-3;
-  }
+  const MaskImage::Pointer core = voxelsAtLeastDeep(fluid, w.P.fluidOpeningMm);
+  MaskImage::Pointer thick = voxelsWithin(core, w.P.fluidOpeningMm + 1e-3);
+  for (std::size_t i = 0; i < w.N; ++i) thick->GetBufferPointer()[i] = thick->GetBufferPointer()[i] && fluid->GetBufferPointer()[i];
   return thick;
 }
 
