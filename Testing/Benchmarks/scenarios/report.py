@@ -185,7 +185,7 @@ def main():
              "the boundary the transform shows (the preoperative brain mapped through it), mean |d| / p95 in mm, "
              "evaluation.json's boundary_under_craniotomy (the demo's rows only); target mean <= 1.0.", ""]
     if kept_methods:
-        lines += ["Not re-run here, kept from the previous scenarios.csv (an earlier head; no boundary figure): "
+        lines += ["Not re-run here, kept from the previous scenarios.csv (an earlier run, perhaps of an earlier head): "
                   + ", ".join(kept_methods) + ".", ""]
     lines += ["| scenario | shift | contrast | resection | method | TRE mean / p95 / max | craniotomy | margin | brain | head | "
               "boundary under craniotomy | brain Dice | trust | s |",
