@@ -168,6 +168,14 @@ void printEvaluationAgainstTruth(const json& evaluation)
                 a["true_max_displacement_mm"].get<double>(), a["moving_mean_error_mm"].get<double>(),
                 a["moving_true_mean_displacement_mm"].get<double>(), a["residual_to_true_boundary_mm"].get<double>());
   }
+  if (const json& b = evaluation.value("boundary_under_craniotomy", json::object()); b.contains("shown") && b["shown"].contains("brainshift")) {
+    const json &s = b["shown"], &n = b.value("imposed_nodes", json::object());
+    std::printf("brain boundary under the craniotomy (%.0f mm radius) to the true one: update mean %.2f mm, p95 %.2f mm; "
+                "rigid %.2f / %.2f mm; surface nodes %.2f / %.2f mm\n",
+                b["radius_mm"].get<double>(), s["brainshift"]["mean_abs_mm"].get<double>(), s["brainshift"]["p95_abs_mm"].get<double>(),
+                s.value("brainshift_rigid", s["truth_rigid"])["mean_abs_mm"].get<double>(),
+                s.value("brainshift_rigid", s["truth_rigid"])["p95_abs_mm"].get<double>(), n.value("mean_abs_mm", 0.0), n.value("p95_abs_mm", 0.0));
+  }
   if (evaluation.contains("uncertainty")) {
     const json& u = evaluation["uncertainty"];
     std::printf("confidence map: rank correlation with the true error %.2f over %zu brain voxels; %.0f %% called below 1 mm, "

@@ -72,6 +72,59 @@ json surfaceEvaluation(const SimulatedCase& simulated, const fs::path& updateFol
           {"p95_residual_to_true_boundary_mm", a.p95ResidualMm}};
 }
 
+namespace {
+json boundaryDistancesJson(const BoundaryDistances& b)
+{
+  return {{"points", b.points}, {"signed_mean_mm", b.signedMeanMm}, {"mean_abs_mm", b.meanAbsMm}, {"p95_abs_mm", b.p95AbsMm},
+          {"max_abs_mm", b.maxAbsMm}};
+}
+
+constexpr const char* kUnderCraniotomy =
+  "under the craniotomy: within radius_mm of the craniotomy axis (through craniotomy_centre_lps along craniotomy_axis_lps, "
+  "outward, in the preoperative frame and so, by the true rigid motion, in the intraoperative space), where the simulated "
+  "case opened the bone. The brain boundary there is the outer surface of labels 2-4 (the resection cavity counted as "
+  "inside) where lines parallel to the axis, 1 mm apart, first enter the brain; a transform T (intraop -> preop) shows the "
+  "preoperative boundary at {y : d(T(y)) = 0}, d the preoperative signed distance on its fine grid (sub-voxel, no "
+  "thick slices). shown.*: each true boundary point's distance to the boundary the transform shows, positive where the "
+  "shown boundary lies outside the true one (the sinking under-compensated). imposed_nodes: the active surface's imposed "
+  "nodes whose preoperative position is within the radius and at most node_depth_mm below the centre, the deformed "
+  "node's signed distance to the true boundary (positive outside) less its own preoperative offset; "
+  "imposed_nodes_undeformed: the same nodes before their displacement (the rigid result).";
+} // namespace
+
+json boundaryUnderCraniotomyEvaluation(const SimulatedCase& simulated, const fs::path& updateFolder)
+{
+  CraniotomyFootprint footprint;
+  footprint.centre = simulated.figures.craniotomyCentre;
+  footprint.outwardAxis = simulated.figures.craniotomyAxis;
+  const CraniotomyBoundaryEvaluation evaluation(*simulated.preopLabels, *simulated.intraopToPreop, *simulated.rigidIntraopToPreop, footprint);
+  json shown = json::object();
+  shown["truth_rigid"] = boundaryDistancesJson(evaluation.shownBoundary(*simulated.rigidIntraopToPreop));
+  std::error_code ec;
+  for (const auto& [key, file] : {std::pair<std::string, fs::path>{"brainshift_rigid", updateFolder / "rigid_intraop_to_preop.tfm"},
+                                  {"brainshift", updateFolder / "intraop_to_preop.h5"},
+                                  {"brainshift_rejected_update", updateFolder / "rejected_intraop_to_preop.h5"}}) {
+    if (fs::exists(file, ec)) shown[key] = boundaryDistancesJson(evaluation.shownBoundary(*readTransform(file)));
+  }
+  json result = {{"definition", kUnderCraniotomy},
+                 {"craniotomy_centre_lps", {footprint.centre[0], footprint.centre[1], footprint.centre[2]}},
+                 {"craniotomy_axis_lps", footprint.outwardAxis},
+                 {"radius_mm", footprint.radiusMm},
+                 {"node_depth_mm", footprint.nodeDepthMm},
+                 {"true_boundary_points", evaluation.trueBoundaryPoints()},
+                 {"shown", shown}};
+  const fs::path surfaceFile = updateFolder / "brain_surface.vtp", rigidFile = updateFolder / "rigid_intraop_to_preop.tfm";
+  if (fs::exists(surfaceFile, ec) && fs::exists(rigidFile, ec)) {
+    vtkSmartPointer<vtkPolyData> surface = vtkPolyData::SafeDownCast(readModel(surfaceFile));
+    if (surface) {
+      const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+      result["imposed_nodes"] = boundaryDistancesJson(evaluation.imposedNodes(surface, *rigid));
+      result["imposed_nodes_undeformed"] = boundaryDistancesJson(evaluation.imposedNodes(surface, *rigid, true));
+    }
+  }
+  return result;
+}
+
 json uncertaintyEvaluation(const SimulatedCase& simulated, const fs::path& updateFolder)
 {
   const UncertaintyValidation u =
@@ -104,6 +157,7 @@ json evaluateUpdateAgainstTruth(const SimulatedCase& simulated, const fs::path& 
   if (fs::exists(out / "brain_surface.vtp", ec) && fs::exists(out / "rigid_intraop_to_preop.tfm", ec)) {
     if (json surface = surfaceEvaluation(simulated, out); !surface.is_null()) evaluation["surface"] = std::move(surface);
   }
+  evaluation["boundary_under_craniotomy"] = boundaryUnderCraniotomyEvaluation(simulated, out);
   if (fs::exists(out / "displacement_uncertainty_mm.nii.gz", ec) && fs::exists(out / "displacement_intraop_to_preop.nrrd", ec)) {
     evaluation["uncertainty"] = uncertaintyEvaluation(simulated, out);
   }

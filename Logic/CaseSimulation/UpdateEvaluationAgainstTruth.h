@@ -18,7 +18,7 @@ namespace brainshift {
 /// registration error: "identity", "truth_rigid", "truth", and "brainshift_rigid", "brainshift",
 /// "brainshift_rejected_update" where the folder holds them), and where the run wrote their files
 /// "classification", "surface" and "uncertainty" (which also writes the true error of the update
-/// as updateFolder/true_error_mm.nii.gz).
+/// as updateFolder/true_error_mm.nii.gz); always "boundary_under_craniotomy".
 nlohmann::json evaluateUpdateAgainstTruth(const SimulatedCase& simulated, const std::filesystem::path& updateFolder,
                                           const std::string& landmarksFile, bool pipelineComplete);
 
@@ -33,6 +33,15 @@ nlohmann::json classificationEvaluation(const SimulatedCase& simulated, const st
 /// The brain surface's displacements (updateFolder/brain_surface.vtp, in the model frame of
 /// updateFolder/rigid_intraop_to_preop.tfm) against the truth; null when the file holds no surface.
 nlohmann::json surfaceEvaluation(const SimulatedCase& simulated, const std::filesystem::path& updateFolder);
+
+/// The intraoperative brain boundary under the craniotomy (CraniotomyBoundaryEvaluation, the
+/// case's craniotomy centre and axis, the 30 mm radius of its bone opening): "definition" (what is
+/// measured, in words), the footprint, "true_boundary_points", "shown" (the boundary the true rigid
+/// motion and the folder's rigid, whole and rejected transforms show, where it holds them, against
+/// the true one) and, where the folder holds brain_surface.vtp and rigid_intraop_to_preop.tfm,
+/// "imposed_nodes" and "imposed_nodes_undeformed". Each figure: "points", "signed_mean_mm",
+/// "mean_abs_mm", "p95_abs_mm", "max_abs_mm".
+nlohmann::json boundaryUnderCraniotomyEvaluation(const SimulatedCase& simulated, const std::filesystem::path& updateFolder);
 
 /// The confidence map (displacement_uncertainty_mm.nii.gz) against the true error of the update's
 /// displacement field (displacement_intraop_to_preop.nrrd), which it writes as true_error_mm.nii.gz.

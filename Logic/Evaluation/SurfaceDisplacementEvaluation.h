@@ -6,6 +6,8 @@
 
 #include <vtkPolyData.h>
 
+#include <array>
+#include <memory>
 #include <set>
 
 namespace brainshift {
@@ -36,5 +38,68 @@ struct SurfaceDisplacementAccuracy {
 SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, const SpatialTransform& trueIntraopToPreop,
                                                         const SpatialTransform& rigidUsed, const LabelImage& preopLabels,
                                                         const std::set<LabelPixel>& brainLabels = {2, 3, 4});
+
+} // namespace brainshift
+
+namespace brainshift {
+
+/// Where the bone is open, in the preoperative frame (LPS): the craniotomy axis through `centre`
+/// (on the preoperative brain surface), outward. "Under the craniotomy" is the cylinder of
+/// `radiusMm` about that axis: the simulated case opens the bone flap and scalp over a disc of
+/// 30 mm radius about it (BrainShiftCaseSimulator's opening radius).
+struct CraniotomyFootprint {
+  PhysicalPoint centre;
+  std::array<double, 3> outwardAxis{};
+  double radiusMm = 30.0;
+  /// Surface nodes count as under the craniotomy when their preoperative position is inside the
+  /// cylinder and no deeper than this below `centre` along the axis (the top of the brain only).
+  double nodeDepthMm = 20.0;
+};
+
+/// Signed distances of points to a brain boundary: positive where the estimate lies outside the
+/// true brain (the sinking under-compensated), negative where inside.
+struct BoundaryDistances {
+  std::size_t points = 0;
+  double signedMeanMm = 0, meanAbsMm = 0, p95AbsMm = 0, maxAbsMm = 0;
+};
+
+/// The intraoperative brain boundary under the craniotomy, as the truth has it and as a transform
+/// shows it. The boundary of `brainLabels` in `preopLabels` (its signed distance, zero on the voxel
+/// faces, on the fine preoperative grid) is carried into the intraoperative space by a transform T
+/// (intraop -> preop): the boundary shown there is {y : distance(T(y)) = 0}, which is what the
+/// preoperative labels warped by T show, without the intraoperative grid's thick slices. It is
+/// sampled where lines parallel to the craniotomy axis, 1 mm apart, first enter the brain from
+/// outside (the resection cavity counts as inside: only the outer surface is seen through the
+/// opening), and triangulated as a height field over the disc of the footprint's radius + 15 mm.
+/// Distances are measured in the intraoperative space (mm), computed in the frame of the true
+/// rigid motion (rigidly the same).
+class CraniotomyBoundaryEvaluation {
+public:
+  CraniotomyBoundaryEvaluation(const LabelImage& preopLabels, const SpatialTransform& trueIntraopToPreop,
+                               const SpatialTransform& trueRigidIntraopToPreop, const CraniotomyFootprint& footprint,
+                               const std::set<LabelPixel>& brainLabels = {2, 3, 4});
+  ~CraniotomyBoundaryEvaluation();
+  CraniotomyBoundaryEvaluation(const CraniotomyBoundaryEvaluation&) = delete;
+  CraniotomyBoundaryEvaluation& operator=(const CraniotomyBoundaryEvaluation&) = delete;
+
+  /// The true boundary's points under the craniotomy (the lines within the radius), each at its
+  /// distance to the boundary that `intraopToPreop` shows: positive where the shown boundary lies
+  /// outside the true one.
+  BoundaryDistances shownBoundary(const SpatialTransform& intraopToPreop) const;
+
+  /// The imposed nodes of `surface` (brainSurface's output in the model frame of `rigidUsed`:
+  /// points x0 + u, arrays "Displacement" and "Imposed") whose preoperative position x0 is under
+  /// the craniotomy: the distance of the deformed node to the true boundary, less the node's own
+  /// signed distance to the preoperative boundary at x0 (a node a little off the boundary should
+  /// stay as far off it). `undeformed`: the nodes at x0 instead (the rigid result's reference).
+  /// std::invalid_argument for a surface without the arrays.
+  BoundaryDistances imposedNodes(vtkPolyData* surface, const SpatialTransform& rigidUsed, bool undeformed = false) const;
+
+  std::size_t trueBoundaryPoints() const;
+
+private:
+  struct Data;
+  std::unique_ptr<Data> d;
+};
 
 } // namespace brainshift

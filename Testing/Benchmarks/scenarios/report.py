@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The hard scenarios' table and charts (Testing/Benchmarks/scenarios/run.sh writes the runs).
 
-  report.py OUT
+  report.py OUT [--keep-rows PREVIOUS_CSV]
 
 Reads OUT/runs/<scenario>/<variant>/ (a `brainshift demo` folder: evaluation.json, report.json,
 case/case.json; true-labels: evaluation-true-labels.json and report.json) and, where present,
@@ -9,6 +9,15 @@ OUT/runs/<scenario>/elastix/elastix_result.json. Writes OUT/scenarios.csv (one r
 method), OUT/summary.md (the table, the targets met, the verdicts of the trust assessment),
 OUT/tre_vs_shift.png (TRE mean against the shift, one series per method, and the craniotomy and
 tumour-margin groups) and OUT/tre_vs_time.png (TRE against the update's wall time).
+
+The brain boundary under the craniotomy (evaluation.json's boundary_under_craniotomy: the true
+intraoperative boundary within 30 mm of the craniotomy axis against the boundary the transform
+shows, mean |d| and p95) is given for the demo's rows: the update's whole transform, and its rigid
+transform on the rigid row; target <= 1 mm mean.
+
+--keep-rows: the rows of PREVIOUS_CSV (an earlier scenarios.csv) whose scenario and method the runs
+in OUT do not give are kept (e.g. the refine, true-labels and elastix rows when only the default
+variant was re-run); summary.md says which methods were kept.
 """
 import csv
 import json
@@ -23,6 +32,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 VARIANT_NAMES = {"once": "BrainShift (default)", "refined": "BrainShift, refine 2 passes"}
 MARGIN_GROUPS = ("tumour-margin", "near-cavity")  # the tumour's margin: in place, or the resection cavity's
 TARGET_MEAN, TARGET_P95, TARGET_GROUP = 1.0, 2.0, 1.5
+TARGET_BOUNDARY = 1.0  # the brain boundary under the craniotomy, mean |d| (issue #15)
+METHOD_ORDER = ["rigid (BrainShift)", "BrainShift (default)", "BrainShift, once, the update set aside",
+                "BrainShift, refine 2 passes", "BrainShift, refined, the update set aside", "BrainShift, true labels (ceiling)",
+                "elastix rigid", "elastix rigid+bspline"]
 
 
 def load(path):
@@ -56,6 +69,15 @@ def row_of(scenario, method, tre, case, seconds=None, extra=None):
     return row
 
 
+def boundary_of(evaluation, key):
+    """The boundary under the craniotomy that transform `key` shows: mean |d| and p95 (mm), or Nones."""
+    b = ((evaluation or {}).get("boundary_under_craniotomy", {}).get("shown", {}) or {}).get(key)
+    if not b:
+        return {"craniotomy_boundary_mm": None, "craniotomy_boundary_p95_mm": None, "craniotomy_boundary_signed_mm": None}
+    return {"craniotomy_boundary_mm": b["mean_abs_mm"], "craniotomy_boundary_p95_mm": b["p95_abs_mm"],
+            "craniotomy_boundary_signed_mm": b["signed_mean_mm"]}
+
+
 def stage_seconds(report):
     if not report:
         return None
@@ -74,7 +96,8 @@ def rows_of_scenario(out, scenario):
             continue
         t = evaluation["transforms"]
         if variant == "once":
-            rows.append(row_of(scenario, "rigid (BrainShift)", t.get("brainshift_rigid"), case))
+            rows.append(row_of(scenario, "rigid (BrainShift)", t.get("brainshift_rigid"), case,
+                               extra=boundary_of(evaluation, "brainshift_rigid")))
         c = evaluation.get("classification", {})
         s = evaluation.get("surface", {})
         trust = (report or {}).get("trust", {})
@@ -85,10 +108,14 @@ def rows_of_scenario(out, scenario):
                  "boundary_residual_mm": s.get("residual_to_true_boundary_mm"),
                  "trust": trust.get("nonrigid"), "refine_passes": refine.get("passes"),
                  "tumour_resected_decided": ((report or {}).get("stages", {}).get("classify", {}) or {}).get("tumour_resected")}
+        extra.update(boundary_of(evaluation, "brainshift"))
+        nodes = evaluation.get("boundary_under_craniotomy", {}).get("imposed_nodes", {})
+        extra["craniotomy_surface_nodes_mm"] = nodes.get("mean_abs_mm")
         rows.append(row_of(scenario, VARIANT_NAMES[variant], t.get("brainshift"), case,
                            stage_seconds(report), extra))
         if "brainshift_rejected_update" in t:
-            rows.append(row_of(scenario, "BrainShift, " + variant + ", the update set aside", t["brainshift_rejected_update"], case))
+            rows.append(row_of(scenario, "BrainShift, " + variant + ", the update set aside", t["brainshift_rejected_update"], case,
+                               extra=boundary_of(evaluation, "brainshift_rejected_update")))
     if case is None:
         return rows
     truth_labels = load(os.path.join(folder, "true-labels", "evaluation-true-labels.json"))
@@ -101,15 +128,45 @@ def rows_of_scenario(out, scenario):
     return rows
 
 
+def parsed(value):
+    """A value of scenarios.csv as report.py wrote it: number, bool, None or text."""
+    if value in ("", None):
+        return None
+    if value in ("True", "False"):
+        return value == "True"
+    try:
+        return float(value)
+    except ValueError:
+        return value
+
+
+def merged_rows(rows, scenarios, previous_csv):
+    """`rows` with the rows of `previous_csv` whose (scenario, method) they lack; the methods kept."""
+    with open(previous_csv, newline="") as f:
+        previous = [{k: parsed(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    have = {(r["scenario"], r["method"]) for r in rows}
+    kept = [r for r in previous if (r["scenario"], r["method"]) not in have]
+    names = list(dict.fromkeys(scenarios + [r["scenario"] for r in kept]))
+    names.sort(key=lambda s: (s != "default", s))
+    rank = {m: i for i, m in enumerate(METHOD_ORDER)}
+    everything = rows + kept
+    everything.sort(key=lambda r: (names.index(r["scenario"]), rank.get(r["method"], len(rank)), r["method"]))
+    return everything, sorted({r["method"] for r in kept})
+
+
 def fmt(v, digits=2):
     return "" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
 
 
 def main():
     out = sys.argv[1]
+    previous_csv = sys.argv[3] if len(sys.argv) > 3 and sys.argv[2] == "--keep-rows" else None
     scenarios = sorted(d for d in os.listdir(os.path.join(out, "runs")) if os.path.isdir(os.path.join(out, "runs", d)))
     scenarios.sort(key=lambda s: (s != "default", s))
     rows = [r for s in scenarios for r in rows_of_scenario(out, s)]
+    kept_methods = []
+    if previous_csv:
+        rows, kept_methods = merged_rows(rows, scenarios, previous_csv)
     columns = list(rows[0].keys()) if rows else []
     for r in rows:
         for k in r:
@@ -123,37 +180,51 @@ def main():
     lines = ["# The hard scenarios", "",
              "`Testing/Benchmarks/scenarios/run.sh`; machine in `machine.txt`. TRE in mm over the case's landmarks "
              "(mean / p95 / max); groups: craniotomy, tumour margin (the tumour in place, or the resection cavity), "
-             "brain elsewhere, head. Targets: mean <= 1.0, p95 <= 2.0, craniotomy and margin <= 1.5.", "",
-             "| scenario | shift | contrast | resection | method | TRE mean / p95 / max | craniotomy | margin | brain | head | brain Dice | trust | s |",
-             "|---|---:|---|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
+             "brain elsewhere, head. Targets: mean <= 1.0, p95 <= 2.0, craniotomy and margin <= 1.5. "
+             "Boundary under craniotomy: the true intraoperative brain boundary within 30 mm of the craniotomy axis against "
+             "the boundary the transform shows (the preoperative brain mapped through it), mean |d| / p95 in mm, "
+             "evaluation.json's boundary_under_craniotomy (the demo's rows only); target mean <= 1.0.", ""]
+    if kept_methods:
+        lines += ["Not re-run here, kept from the previous scenarios.csv (an earlier run, perhaps of an earlier head): "
+                  + ", ".join(kept_methods) + ".", ""]
+    lines += ["| scenario | shift | contrast | resection | method | TRE mean / p95 / max | craniotomy | margin | brain | head | "
+              "boundary under craniotomy | brain Dice | trust | s |",
+              "|---|---:|---|---|---|---|---:|---:|---:|---:|---|---:|---|---:|"]
     for r in rows:
         tre = f"{fmt(r['tre_mean_mm'])} / {fmt(r['tre_p95_mm'])} / {fmt(r['tre_max_mm'])}"
+        boundary = ("" if r.get("craniotomy_boundary_mm") is None
+                    else f"{fmt(r['craniotomy_boundary_mm'])} / {fmt(r['craniotomy_boundary_p95_mm'])}")
         lines.append(f"| {r['scenario']} | {fmt(r['shift_mm'], 0)} | {r['contrast']} | {'yes' if r['resection'] else 'no'} | "
                      f"{r['method']} | {tre} | {fmt(r['tre_craniotomy_mm'])} | {fmt(r['tre_margin_mm'])} | "
-                     f"{fmt(r['tre_brain_mm'])} | {fmt(r['tre_head_mm'])} | {fmt(r.get('brain_dice'), 3)} | "
+                     f"{fmt(r['tre_brain_mm'])} | {fmt(r['tre_head_mm'])} | {boundary} | {fmt(r.get('brain_dice'), 3)} | "
                      f"{r.get('trust') or ''} | {fmt(r['wall_seconds'], 1)} |")
     lines += ["", "## Targets met (mean <= 1.0 and p95 <= 2.0 mm)", "",
-              "| method | scenarios | met | craniotomy and margin <= 1.5 mm |", "|---|---:|---:|---:|"]
+              "| method | scenarios | met | craniotomy and margin <= 1.5 mm | boundary under craniotomy <= 1 mm (of those measured) |",
+              "|---|---:|---:|---:|---:|"]
     for method in sorted({r["method"] for r in rows}):
         subset = [r for r in rows if r["method"] == method and r["tre_mean_mm"] is not None]
         met = sum(1 for r in subset if r["tre_mean_mm"] <= TARGET_MEAN and r["tre_p95_mm"] <= TARGET_P95)
         groups = sum(1 for r in subset if (r["tre_craniotomy_mm"] or 0) <= TARGET_GROUP and (r["tre_margin_mm"] or 0) <= TARGET_GROUP)
-        lines.append(f"| {method} | {len(subset)} | {met} | {groups} |")
+        measured = [r for r in subset if r.get("craniotomy_boundary_mm") is not None]
+        boundary = (f"{sum(1 for r in measured if r['craniotomy_boundary_mm'] <= TARGET_BOUNDARY)} of {len(measured)}"
+                    if measured else "")
+        lines.append(f"| {method} | {len(subset)} | {met} | {groups} | {boundary} |")
     with open(os.path.join(out, "summary.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
 
     methods = [m for m in ["rigid (BrainShift)", "BrainShift (default)", "BrainShift, refine 2 passes",
                            "BrainShift, true labels (ceiling)", "elastix rigid+bspline"] if any(r["method"] == m for r in rows)]
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
-    for ax, key, title in zip(axes, ["tre_mean_mm", "tre_craniotomy_mm", "tre_margin_mm"],
-                              ["all landmarks", "craniotomy", "tumour margin"]):
+    fig, axes = plt.subplots(1, 4, figsize=(21, 5))
+    for ax, key, title in zip(axes, ["tre_mean_mm", "tre_craniotomy_mm", "tre_margin_mm", "craniotomy_boundary_mm"],
+                              ["all landmarks", "craniotomy", "tumour margin", "brain boundary under the craniotomy"]):
         for i, m in enumerate(methods):
-            pts = [(r["shift_mm"] + 0.25 * (i - len(methods) / 2), r[key]) for r in rows if r["method"] == m and r[key] is not None]
+            pts = [(r["shift_mm"] + 0.25 * (i - len(methods) / 2), r.get(key)) for r in rows if r["method"] == m and r.get(key) is not None]
             if pts:
                 ax.scatter(*zip(*pts), label=m, s=18)
-        ax.axhline(TARGET_MEAN if key == "tre_mean_mm" else TARGET_GROUP, color="grey", lw=0.8, ls="--")
+        target = {"tre_mean_mm": TARGET_MEAN, "craniotomy_boundary_mm": TARGET_BOUNDARY}.get(key, TARGET_GROUP)
+        ax.axhline(target, color="grey", lw=0.8, ls="--")
         ax.set_xlabel("shift (mm)")
-        ax.set_ylabel("TRE mean (mm)")
+        ax.set_ylabel("boundary distance mean |d| (mm)" if key == "craniotomy_boundary_mm" else "TRE mean (mm)")
         ax.set_title(title)
     axes[0].legend(fontsize=7)
     fig.tight_layout()

@@ -18,7 +18,7 @@
 # OUTPUT_DIR defaults to Testing/Benchmarks/results/scenarios; the scenarios default to all of
 # them (brainshift demo --help lists them). Each demo builds its case anew in its run folder (the
 # finite element truth's scenarios take about 30 s more for CalculiX). VARIANTS (default "once
-# refined true-labels") chooses the variants. Writes OUTPUT_DIR/machine.txt, scenarios.csv, summary.md,
+# refined true-labels") chooses the variants; KEEP_ROWS=1 keeps the earlier table's other rows. Writes OUTPUT_DIR/machine.txt, scenarios.csv, summary.md,
 # tre_vs_shift.png, tre_vs_time.png.
 set -euo pipefail
 
@@ -37,6 +37,14 @@ if [ ${#scenarios[@]} -eq 0 ]; then
   mapfile -t scenarios < <("$brainshift" demo --help | sed -n 's/.*--scenario TEXT=default.*values): //p' | tr ',' '\n' | tr -d ' ')
 fi
 [ ${#scenarios[@]} -gt 0 ] || die "no scenario named and none listed by brainshift demo --help"
+# KEEP_ROWS=1: the rows of the scenarios.csv already in OUTPUT_DIR that this run does not give (other
+# variants, other scenarios, elastix) are kept in the new table (report.py --keep-rows).
+keep=()
+if [ "${KEEP_ROWS:-0}" != 0 ] && [ -f "$out/scenarios.csv" ]; then
+  mkdir -p "$out/runs"
+  cp "$out/scenarios.csv" "$out/runs/previous-scenarios.csv"
+  keep=(--keep-rows "$(cd "$out/runs" && pwd)/previous-scenarios.csv")
+fi
 prepare_output machine.txt scenarios.csv summary.md tre_vs_shift.png tre_vs_time.png
 write_machine_description
 mkdir -p "$out/runs"
@@ -83,5 +91,5 @@ for scenario in "${scenarios[@]}"; do
   fi
 done
 
-run "$python" "$here/report.py" "$out"
+run "$python" "$here/report.py" "$out" "${keep[@]}"
 say "done: $out/summary.md"

@@ -8,6 +8,8 @@
 #include "SceneIO.h"
 #include "UpdateEvaluationAgainstTruth.h"
 
+#include <iostream>
+
 namespace {
 using namespace brainshift;
 namespace fs = std::filesystem;
@@ -44,6 +46,24 @@ void checkScene(const CaseFiles& files)
   BS_CHECK(landmarks && landmarks->parentTransformId() == truth->id());
 }
 
+/// The boundary under the craniotomy of an update folder holding the truth: the whole transform shows
+/// it exactly; the rigid part alone shows it where it was before the shift: out by the sinking's
+/// normal component, at most the 10 mm peak on the axis, less at the rim (sigma 25 mm, 30 mm radius).
+void checkBoundaryUnderCraniotomy(const nlohmann::json& b)
+{
+  BS_CHECK(b["radius_mm"] == 30.0 && b["true_boundary_points"].get<std::size_t>() > 2000); // 2821 lines 1 mm apart, nearly all hit
+  const nlohmann::json& shown = b["shown"];
+  BS_CHECK(shown["brainshift"]["points"] == b["true_boundary_points"]);
+  BS_CHECK(shown["brainshift"]["max_abs_mm"].get<double>() < 1e-3);
+  const nlohmann::json& rigid = shown["brainshift_rigid"];
+  std::cout << "rigid under the craniotomy: mean " << rigid["mean_abs_mm"] << ", p95 " << rigid["p95_abs_mm"] << ", max " << rigid["max_abs_mm"] << '\n';
+  BS_CHECK_NEAR(rigid["mean_abs_mm"].get<double>(), shown["truth_rigid"]["mean_abs_mm"].get<double>(), 1e-6);
+  BS_CHECK(rigid["mean_abs_mm"].get<double>() > 4.0 && rigid["mean_abs_mm"].get<double>() < 7.2);
+  BS_CHECK(rigid["signed_mean_mm"].get<double>() > 0.98 * rigid["mean_abs_mm"].get<double>()); // outside: the brain sank
+  BS_CHECK(rigid["max_abs_mm"].get<double>() > 8.5 && rigid["max_abs_mm"].get<double>() < 10.05);
+  BS_CHECK(!b.contains("imposed_nodes")); // no brain_surface.vtp in the folder
+}
+
 /// An update folder holding the case's own truth as the update: the true transforms and labels.
 void checkEvaluationOfTheTruth(const SimulatedCase& c, const CaseFiles& files, const fs::path& update)
 {
@@ -63,6 +83,7 @@ void checkEvaluationOfTheTruth(const SimulatedCase& c, const CaseFiles& files, c
   // Maurer's distance to the boundary between voxel centres: within half the smallest spacing (2.5 mm) of 0.
   BS_CHECK(e["classification"]["brain_surface_distance_mm"].get<double>() < 1.25);
   BS_CHECK(!e.contains("surface") && !e.contains("uncertainty")); // their files are not in the folder
+  checkBoundaryUnderCraniotomy(e["boundary_under_craniotomy"]);
   BS_CHECK(!fs::exists(update / "true_error_mm.nii.gz"));
 }
 } // namespace
