@@ -1,5 +1,7 @@
 #include "DeformationField.h"
 
+#include "ParallelRanges.h"
+
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkNearestNeighborInterpolateImageFunction.h>
 #include <itkSmoothingRecursiveGaussianImageFilter.h>
@@ -18,6 +20,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 
 namespace brainshift {
 
@@ -312,19 +315,21 @@ double fadeCorrectionOutsideMesh(VoxelCorrection& correction, const ImageGeometr
   const std::array<ScalarImage::Pointer, 4> smoothedImages = smoothedMaskAndCorrection(correction, lattice, blocks, sigma);
   std::array<const float*, 4> smoothed{};
   for (std::size_t c = 0; c < 4; ++c) smoothed[c] = smoothedImages[c]->GetBufferPointer();
-  for (long k = 0; k < lattice.nz; ++k) {
-    for (long j = 0; j < lattice.ny; ++j) {
-      for (long i = 0; i < lattice.nx; ++i) {
-        const std::size_t at = lattice.offset(i, j, k);
-        if (correction.located[at]) continue;
-        const std::array<double, 4> value = interpolateChannels(smoothed, blocks, i, j, k);
-        const double m = value[0];
-        for (int d = 0; d < 3; ++d) {
-          correction.w[3 * at + std::size_t(d)] = m > 1e-6 ? float(value[d + 1] / m * std::min(1.0, 2.0 * m)) : 0.0f;
+  parallelRanges(std::size_t(lattice.nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned) {
+    for (long k = long(kBegin); k < long(kEnd); ++k) {
+      for (long j = 0; j < lattice.ny; ++j) {
+        for (long i = 0; i < lattice.nx; ++i) {
+          const std::size_t at = lattice.offset(i, j, k);
+          if (correction.located[at]) continue;
+          const std::array<double, 4> value = interpolateChannels(smoothed, blocks, i, j, k);
+          const double m = value[0];
+          for (int d = 0; d < 3; ++d) {
+            correction.w[3 * at + std::size_t(d)] = m > 1e-6 ? float(value[d + 1] / m * std::min(1.0, 2.0 * m)) : 0.0f;
+          }
         }
       }
     }
-  }
+  });
   return sigma;
 }
 
@@ -336,18 +341,22 @@ DisplacementFieldImage::Pointer rigidWithCorrectionField(const VoxelCorrection& 
   DisplacementFieldImage::Pointer result = grid.allocate<DisplacementFieldImage>();
   DisplacementVector* field = result->GetBufferPointer();
   const std::vector<float>& correctionW = correction.w;
-  for (long k = 0; k < lattice.nz; ++k) {
-    for (long j = 0; j < lattice.ny; ++j) {
-      for (long i = 0; i < lattice.nx; ++i) {
-        const std::size_t at = lattice.offset(i, j, k);
-        const Vec y = maps.indexToPhysical * Vec(double(i), double(j), double(k)) + maps.origin;
-        const Vec w(correctionW[3 * at], correctionW[3 * at + 1], correctionW[3 * at + 2]);
-        maximumNonRigidMm = std::max(maximumNonRigidMm, w.norm());
-        const Vec x = maps.rigidMatrix * y + maps.rigidTranslation + w;
-        for (int d = 0; d < 3; ++d) field[at][unsigned(d)] = float(x[d] - y[d]);
+  std::vector<double> largest(parallelThreads(), 0.0);
+  parallelRanges(std::size_t(lattice.nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned thread) {
+    for (long k = long(kBegin); k < long(kEnd); ++k) {
+      for (long j = 0; j < lattice.ny; ++j) {
+        for (long i = 0; i < lattice.nx; ++i) {
+          const std::size_t at = lattice.offset(i, j, k);
+          const Vec y = maps.indexToPhysical * Vec(double(i), double(j), double(k)) + maps.origin;
+          const Vec w(correctionW[3 * at], correctionW[3 * at + 1], correctionW[3 * at + 2]);
+          largest[thread] = std::max(largest[thread], w.norm());
+          const Vec x = maps.rigidMatrix * y + maps.rigidTranslation + w;
+          for (int d = 0; d < 3; ++d) field[at][unsigned(d)] = float(x[d] - y[d]);
+        }
       }
     }
-  }
+  });
+  maximumNonRigidMm = std::max(maximumNonRigidMm, *std::max_element(largest.begin(), largest.end()));
   return result;
 }
 
@@ -360,30 +369,35 @@ void measureFolding(const GridMaps& maps, const ImageGeometry& grid, Deformation
   result.jacobianDeterminant = grid.allocate<ScalarImage>();
   float* jacobian = result.jacobianDeterminant->GetBufferPointer();
   const Mat physicalToIndex = maps.indexToPhysical.inverse();
-  result.minimumJacobian = std::numeric_limits<double>::infinity();
-  for (long k = 0; k < nz; ++k) {
-    for (long j = 0; j < ny; ++j) {
-      for (long i = 0; i < nx; ++i) {
-        const long idx[3] = {i, j, k};
-        const long size[3] = {nx, ny, nz};
-        Mat dIndex; // d(d)/d(index)
-        for (int a = 0; a < 3; ++a) {
-          long lo[3] = {i, j, k}, hi[3] = {i, j, k};
-          lo[a] = std::max(0L, idx[a] - 1);
-          hi[a] = std::min(size[a] - 1, idx[a] + 1);
-          const double step = double(hi[a] - lo[a]);
-          const DisplacementVector& f1 = field[std::size_t(hi[0] + nx * (hi[1] + ny * hi[2]))];
-          const DisplacementVector& f0 = field[std::size_t(lo[0] + nx * (lo[1] + ny * lo[2]))];
-          for (int d = 0; d < 3; ++d) dIndex(d, a) = step > 0 ? (double(f1[unsigned(d)]) - double(f0[unsigned(d)])) / step : 0.0;
+  std::vector<double> minimum(parallelThreads(), std::numeric_limits<double>::infinity());
+  std::vector<std::size_t> folded(parallelThreads(), 0);
+  parallelRanges(std::size_t(nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned thread) {
+    for (long k = long(kBegin); k < long(kEnd); ++k) {
+      for (long j = 0; j < ny; ++j) {
+        for (long i = 0; i < nx; ++i) {
+          const long idx[3] = {i, j, k};
+          const long size[3] = {nx, ny, nz};
+          Mat dIndex; // d(d)/d(index)
+          for (int a = 0; a < 3; ++a) {
+            long lo[3] = {i, j, k}, hi[3] = {i, j, k};
+            lo[a] = std::max(0L, idx[a] - 1);
+            hi[a] = std::min(size[a] - 1, idx[a] + 1);
+            const double step = double(hi[a] - lo[a]);
+            const DisplacementVector& f1 = field[std::size_t(hi[0] + nx * (hi[1] + ny * hi[2]))];
+            const DisplacementVector& f0 = field[std::size_t(lo[0] + nx * (lo[1] + ny * lo[2]))];
+            for (int d = 0; d < 3; ++d) dIndex(d, a) = step > 0 ? (double(f1[unsigned(d)]) - double(f0[unsigned(d)])) / step : 0.0;
+          }
+          const double det = (Mat::Identity() + dIndex * physicalToIndex).determinant();
+          const std::size_t at = std::size_t(i + nx * (j + ny * k));
+          jacobian[at] = float(det);
+          minimum[thread] = std::min(minimum[thread], det);
+          folded[thread] += det <= 0;
         }
-        const double det = (Mat::Identity() + dIndex * physicalToIndex).determinant();
-        const std::size_t at = std::size_t(i + nx * (j + ny * k));
-        jacobian[at] = float(det);
-        result.minimumJacobian = std::min(result.minimumJacobian, det);
-        result.foldedVoxels += det <= 0;
       }
     }
-  }
+  });
+  result.minimumJacobian = *std::min_element(minimum.begin(), minimum.end());
+  result.foldedVoxels = std::accumulate(folded.begin(), folded.end(), std::size_t(0));
 }
 } // namespace
 
@@ -424,16 +438,18 @@ DisplacementFieldImage::Pointer linearTransformField(const SpatialTransform& tra
   DisplacementFieldImage::Pointer field = grid.allocate<DisplacementFieldImage>();
   DisplacementVector* out = field->GetBufferPointer();
   const long nx = long(grid.size[0]), ny = long(grid.size[1]), nz = long(grid.size[2]);
-  for (long k = 0; k < nz; ++k) {
-    for (long j = 0; j < ny; ++j) {
-      for (long i = 0; i < nx; ++i) {
-        const Vec y = g.indexToPhysical * Vec(double(i), double(j), double(k)) + g.origin;
-        const Vec d = g.rigidMatrix * y + g.rigidTranslation - y;
-        DisplacementVector& v = out[std::size_t(i + nx * (j + ny * k))];
-        for (unsigned c = 0; c < 3; ++c) v[c] = float(d[int(c)]);
+  parallelRanges(std::size_t(nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned) {
+    for (long k = long(kBegin); k < long(kEnd); ++k) {
+      for (long j = 0; j < ny; ++j) {
+        for (long i = 0; i < nx; ++i) {
+          const Vec y = g.indexToPhysical * Vec(double(i), double(j), double(k)) + g.origin;
+          const Vec d = g.rigidMatrix * y + g.rigidTranslation - y;
+          DisplacementVector& v = out[std::size_t(i + nx * (j + ny * k))];
+          for (unsigned c = 0; c < 3; ++c) v[c] = float(d[int(c)]);
+        }
       }
     }
-  }
+  });
   return field;
 }
 

@@ -3,6 +3,7 @@
 #include "AtomicFile.h"
 #include "Configuration.h"
 #include "DistanceMaps.h"
+#include "ParallelRanges.h"
 #include "MarkupsIO.h"
 
 #include <itkBSplineControlPointImageFilter.h>
@@ -35,18 +36,6 @@ enum : LabelPixel { Background = 0, Head = 1, Parenchyma = 2, Ventricles = 3, Tu
 double secondsSince(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-/// Runs body(begin, end) over [0, count) on the machine's cores, in contiguous chunks.
-void parallelRanges(std::size_t count, const std::function<void(std::size_t, std::size_t, unsigned)>& body)
-{
-  const unsigned threads = std::max(1u, std::min(8u, std::thread::hardware_concurrency()));
-  std::vector<std::thread> workers;
-  for (unsigned t = 0; t < threads; ++t) {
-    const std::size_t begin = count * t / threads, end = count * (t + 1) / threads;
-    workers.emplace_back([&, begin, end, t] { body(begin, end, t); });
-  }
-  for (auto& w : workers) w.join();
 }
 
 /// The index -> physical mapping of a grid as one affine map: p = origin + M * index.

@@ -20,6 +20,7 @@
 #include "BrainShiftErrors.h"
 #include "FiniteElementSolver.h"
 #include "ImageMatchingSolve.h"
+#include "ParallelRanges.h"
 #include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
@@ -875,15 +876,22 @@ SpatialTransform::Pointer wholeMappingTransform(const DisplacementFieldImage& fi
   residual->CopyInformation(&field);
   residual->SetRegions(field.GetLargestPossibleRegion());
   residual->Allocate();
-  itk::ImageRegionConstIteratorWithIndex<DisplacementFieldImage> it(&field, field.GetLargestPossibleRegion());
-  for (; !it.IsAtEnd(); ++it) {
-    PhysicalPoint y;
-    field.TransformIndexToPhysicalPoint(it.GetIndex(), y);
-    const PhysicalPoint z = inverse->TransformPoint(y + it.Get());
-    DisplacementVector e;
-    for (unsigned k = 0; k < 3; ++k) e[k] = typename DisplacementVector::ValueType(z[k] - y[k]);
-    residual->SetPixel(it.GetIndex(), e);
-  }
+  const auto size = field.GetLargestPossibleRegion().GetSize();
+  const DisplacementVector* d = field.GetBufferPointer();
+  DisplacementVector* e = residual->GetBufferPointer();
+  parallelRanges(size[2], [&](std::size_t zBegin, std::size_t zEnd, unsigned) {
+    for (std::size_t z = zBegin; z < zEnd; ++z) {
+      for (std::size_t y = 0; y < size[1]; ++y) {
+        for (std::size_t x = 0; x < size[0]; ++x) {
+          const std::size_t at = x + size[0] * (y + size[1] * z);
+          PhysicalPoint p;
+          field.TransformIndexToPhysicalPoint({{itk::IndexValueType(x), itk::IndexValueType(y), itk::IndexValueType(z)}}, p);
+          const PhysicalPoint q = inverse->TransformPoint(p + d[at]);
+          for (unsigned k = 0; k < 3; ++k) e[at][k] = typename DisplacementVector::ValueType(q[k] - p[k]);
+        }
+      }
+    }
+  });
   composite->AddTransform(const_cast<SpatialTransform*>(&rigid)); // applied second
   composite->AddTransform(makeDisplacementFieldTransform(residual)); // applied first
   return SpatialTransform::Pointer(composite.GetPointer());
