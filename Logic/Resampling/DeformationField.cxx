@@ -333,6 +333,112 @@ double fadeCorrectionOutsideMesh(VoxelCorrection& correction, const ImageGeometr
   return sigma;
 }
 
+/// The correction continued outside the mesh: each voxel of the band, its neighbours' mean.
+struct Continuation {
+  std::vector<std::size_t> voxels; ///< in the order reached
+  std::vector<float> w;            ///< three a voxel
+  std::vector<float> distanceMm;   ///< along the grid's axes from the mesh
+};
+
+/// Peels the band outward from the located voxels, layer by layer over face neighbours, to
+/// `reachMm`: a voxel reached takes the mean correction of its neighbours already holding one (the
+/// mesh's, or an earlier layer's), and the least of their distances plus the step.
+Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLattice& lattice, const ImageGeometry& grid,
+                                double reachMm)
+{
+  const std::size_t n = correction.located.size();
+  std::vector<float> distance(n, std::numeric_limits<float>::infinity()), continued(3 * n, 0.0f);
+  std::vector<unsigned char> queued(correction.located);
+  for (std::size_t at = 0; at < n; ++at) {
+    if (correction.located[at]) distance[at] = 0.0f;
+  }
+  const long steps[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  auto forNeighbours = [&](std::size_t at, auto&& visit) {
+    const long i = long(at % std::size_t(lattice.nx)), j = long((at / std::size_t(lattice.nx)) % std::size_t(lattice.ny)),
+               k = long(at / std::size_t(lattice.nx * lattice.ny));
+    for (int s = 0; s < 6; ++s) {
+      const long a = i + steps[s][0], b = j + steps[s][1], c = k + steps[s][2];
+      if (a < 0 || b < 0 || c < 0 || a >= lattice.nx || b >= lattice.ny || c >= lattice.nz) continue;
+      visit(lattice.offset(a, b, c), grid.spacing[unsigned(s / 2)]);
+    }
+  };
+  std::vector<std::size_t> frontier;
+  for (std::size_t at = 0; at < n; ++at) {
+    if (!correction.located[at]) continue;
+    forNeighbours(at, [&](std::size_t nb, double) {
+      if (!queued[nb]) {
+        queued[nb] = 1;
+        frontier.push_back(nb);
+      }
+    });
+  }
+  Continuation band;
+  while (!frontier.empty()) {
+    std::vector<std::size_t> layer;
+    std::vector<float> layerDistance;
+    for (std::size_t at : frontier) {
+      double sum[3] = {0, 0, 0}, count = 0, nearest = std::numeric_limits<double>::infinity();
+      forNeighbours(at, [&](std::size_t nb, double step) {
+        if (!std::isfinite(distance[nb])) return;
+        const float* w = correction.located[nb] ? &correction.w[3 * nb] : &continued[3 * nb];
+        for (int d = 0; d < 3; ++d) sum[d] += w[d];
+        count += 1;
+        nearest = std::min(nearest, double(distance[nb]) + step);
+      });
+      if (count == 0 || nearest > reachMm) continue;
+      for (int d = 0; d < 3; ++d) continued[3 * at + std::size_t(d)] = float(sum[d] / count);
+      layer.push_back(at);
+      layerDistance.push_back(float(nearest));
+    }
+    std::vector<std::size_t> next;
+    for (std::size_t l = 0; l < layer.size(); ++l) { // set after the layer: its voxels see the layers before alone
+      const std::size_t at = layer[l];
+      distance[at] = layerDistance[l];
+      band.voxels.push_back(at);
+      for (int d = 0; d < 3; ++d) band.w.push_back(continued[3 * at + std::size_t(d)]);
+      band.distanceMm.push_back(layerDistance[l]);
+      forNeighbours(at, [&](std::size_t nb, double) {
+        if (!queued[nb]) {
+          queued[nb] = 1;
+          next.push_back(nb);
+        }
+      });
+    }
+    frontier.swap(next);
+  }
+  return band;
+}
+
+/// Keeps the continued correction whole over the first layer of voxels outside the mesh (within
+/// the grid's largest spacing: a thick slice whose centre lies outside the deformed mesh still
+/// holds its boundary), then blends it into the fade (already in correction.w) over the band, and
+/// returns the band's width: wide enough that the blend compresses the space across it by at most
+/// the parameters' share (the largest difference between the two anywhere within reach, over that
+/// share), within their bounds.
+double blendContinuation(VoxelCorrection& correction, const Continuation& band, const ImageGeometry& grid,
+                         const DeformationFieldParameters& parameters, std::size_t& continuedVoxels)
+{
+  const double firstLayerMm = std::max({grid.spacing[0], grid.spacing[1], grid.spacing[2]});
+  double largestJump = 0;
+  for (std::size_t b = 0; b < band.voxels.size(); ++b) {
+    const float* fade = &correction.w[3 * band.voxels[b]];
+    double squared = 0;
+    for (int d = 0; d < 3; ++d) squared += std::pow(double(band.w[3 * b + std::size_t(d)]) - fade[d], 2);
+    largestJump = std::max(largestJump, std::sqrt(squared));
+  }
+  const double width = std::clamp(largestJump / parameters.continuationMaximumCompression, parameters.continuationMinimumMm,
+                                  parameters.continuationMaximumMm);
+  continuedVoxels = 0;
+  for (std::size_t b = 0; b < band.voxels.size(); ++b) {
+    const double t = std::max(0.0, band.distanceMm[b] - firstLayerMm) / width;
+    if (t >= 1) continue;
+    float* w = &correction.w[3 * band.voxels[b]];
+    for (int d = 0; d < 3; ++d) w[d] = float((1 - t) * band.w[3 * b + std::size_t(d)] + t * w[d]);
+    ++continuedVoxels;
+  }
+  return width;
+}
+
 /// The whole mapping: x = R(y) + w, d = x - y; also the largest |w|.
 DisplacementFieldImage::Pointer rigidWithCorrectionField(const VoxelCorrection& correction, const GridMaps& maps,
                                                          const ImageGeometry& grid, double& maximumNonRigidMm)
@@ -418,7 +524,11 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
 
   const auto fallbackStart = std::chrono::steady_clock::now();
   result.meshVoxels = std::size_t(std::count(correction.located.begin(), correction.located.end(), 1));
+  const Continuation band = parameters.continuationMaximumMm > 0
+                              ? continueCorrection(correction, lattice, grid, parameters.continuationMaximumMm)
+                              : Continuation{};
   result.fallbackSigmaMm = fadeCorrectionOutsideMesh(correction, grid, lattice, parameters.fallbackSigmaMm);
+  if (!band.voxels.empty()) result.continuationBandMm = blendContinuation(correction, band, grid, parameters, result.continuedVoxels);
   result.fallbackSeconds = secondsSince(fallbackStart);
 
   result.field = rigidWithCorrectionField(correction, maps, grid, result.maximumNonRigidMm);

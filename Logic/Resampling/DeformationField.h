@@ -8,7 +8,12 @@
 // holds it, and its barycentric coordinates there give X = sum lambda_k X_k. Outside the deformed
 // mesh the non-rigid correction X - p fades smoothly to zero (a normalised Gaussian extension of the
 // correction from the mesh, about `fallbackSigmaMm` wide), so far from the brain the mapping is the
-// rigid one. The Jacobian determinant of y -> x flags folding (<= 0).
+// rigid one. Next to the mesh the correction first continues across the brain's boundary (each
+// voxel takes its neighbours' inside the mesh) and blends into the fade over a band: the boundary
+// the update shows is the deformed mesh's, not pulled back towards the preoperative one by the
+// fade's average of the corrections deeper inside (where the brain sank under a craniotomy, the gap
+// above it shows the preoperative space above the brain, not brain). The Jacobian determinant of
+// y -> x flags folding (<= 0).
 #include "BrainShiftErrors.h"
 #include "ImageTypes.h"
 #include "TransformIO.h"
@@ -23,6 +28,13 @@ struct DeformationFieldParameters {
   /// The fade's width; it grows with the largest correction on the mesh's boundary (at least
   /// 1.2 times it), so that the fade does not fold the space between the brain and the skull.
   double fallbackSigmaMm = 4.0;
+  /// The band outside the mesh over which the continued correction blends into the fade, beyond the
+  /// first layer of voxels (within the grid's largest spacing), which keeps it whole: at least
+  /// `continuationMinimumMm`, and wide enough that the blend compresses the space along it by at
+  /// most `continuationMaximumCompression` (the band's width is the largest difference between
+  /// the continued correction and the fade within continuationMaximumMm, divided by it), up to
+  /// `continuationMaximumMm`. 0 for continuationMaximumMm: the fade alone.
+  double continuationMinimumMm = 3.0, continuationMaximumMm = 15.0, continuationMaximumCompression = 2.0 / 3.0;
 };
 
 struct DeformationField {
@@ -32,6 +44,8 @@ struct DeformationField {
   std::size_t invertedDeformedTetrahedra = 0; ///< tetrahedra the displacement turned inside out
   double minimumJacobian = 0, maximumNonRigidMm = 0;
   double fallbackSigmaMm = 0; ///< the fade's width used
+  double continuationBandMm = 0; ///< the band's width used (0: none)
+  std::size_t continuedVoxels = 0; ///< voxels outside the mesh given a continued correction
   double locateSeconds = 0, fallbackSeconds = 0, jacobianSeconds = 0;
 };
 

@@ -1072,6 +1072,8 @@ void reportWarpStage(RunContext& context, const DeformationField& deformation, b
                                      {"inverted_deformed_tetrahedra", deformation.invertedDeformedTetrahedra},
                                      {"max_non_rigid_mm", deformation.maximumNonRigidMm},
                                      {"fallback_sigma_mm", deformation.fallbackSigmaMm},
+                                     {"continuation_band_mm", deformation.continuationBandMm},
+                                     {"continued_voxels", deformation.continuedVoxels},
                                      {"volumes_warped", 2 + context.overlays().size()},
                                      {"rigid_fallback", rigidFallback},
                                      {"read_seconds", seconds.read},

@@ -1,0 +1,136 @@
+// The boundary the field shows where the brain sank: a box of brain whose top sinks 6 mm while its
+// bottom stays (u_z falling linearly with depth, exact inside the mesh), seen on a grid of 2.5 mm
+// slices. Above the sunken top face the mapping must show the preoperative space above the brain,
+// so the boundary the warped labels show is the deformed face (within half a millimetre). The fade
+// alone (continuationMaximumMm 0) averages the smaller corrections deeper inside and shows the
+// boundary more than a millimetre too high: the failure the continuation fixes. Neither folds.
+#include "BrainShiftTestingSupport.h"
+#include "DeformationField.h"
+#include "SyntheticData.h"
+
+#include <itkIdentityTransform.h>
+#include <itkImageRegionIteratorWithIndex.h>
+#include <vtkDoubleArray.h>
+#include <vtkPointData.h>
+#include <vtkPoints.h>
+#include <vtkSmartPointer.h>
+#include <vtkUnstructuredGrid.h>
+
+#include <cmath>
+#include <iostream>
+
+namespace {
+using namespace brainshift;
+using brainshift::testing::point;
+
+constexpr double BoxTop = 20.0, BoxBottom = -20.0, SinkMm = 6.0;
+
+/// The box [-20, 20] mm cubed in cubes of 4 mm, each cut into the six tetrahedra about its
+/// diagonal (Kuhn): a conforming mesh with flat faces.
+vtkSmartPointer<vtkUnstructuredGrid> kuhnBox()
+{
+  constexpr int cells = 10;
+  constexpr double step = (BoxTop - BoxBottom) / cells;
+  auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
+  vtkNew<vtkPoints> points;
+  auto node = [](int i, int j, int k) { return vtkIdType(i + (cells + 1) * (j + (cells + 1) * k)); };
+  for (int k = 0; k <= cells; ++k)
+    for (int j = 0; j <= cells; ++j)
+      for (int i = 0; i <= cells; ++i) points->InsertNextPoint(BoxBottom + step * i, BoxBottom + step * j, BoxBottom + step * k);
+  mesh->SetPoints(points);
+  const int orders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  for (int k = 0; k < cells; ++k)
+    for (int j = 0; j < cells; ++j)
+      for (int i = 0; i < cells; ++i)
+        for (const auto& order : orders) {
+          int corner[3] = {i, j, k};
+          vtkIdType ids[4] = {node(i, j, k), 0, 0, 0};
+          for (int v = 0; v < 3; ++v) {
+            corner[order[v]] += 1;
+            ids[v + 1] = node(corner[0], corner[1], corner[2]);
+          }
+          mesh->InsertNextCell(VTK_TETRA, 4, ids);
+        }
+  return mesh;
+}
+
+/// The height where the field shows the preoperative top face (X_z = BoxTop), along the column of
+/// the grid's voxels (i, j): interpolated between the last slice that shows brain and the next.
+double shownTopFace(const DeformationField& f, long i, long j)
+{
+  const auto size = f.field->GetLargestPossibleRegion().GetSize();
+  double previousY = 0, previousX = 0;
+  for (long k = 0; k < long(size[2]); ++k) {
+    PhysicalPoint y;
+    f.field->TransformIndexToPhysicalPoint({{i, j, k}}, y);
+    const double x = y[2] + f.field->GetPixel({{i, j, k}})[2];
+    if (k > 0 && previousX < BoxTop && x >= BoxTop) return previousY + (BoxTop - previousX) / (x - previousX) * (y[2] - previousY);
+    previousY = y[2];
+    previousX = x;
+  }
+  return std::nan("");
+}
+
+/// The shown top face over the columns within 10 mm of the box's axis: the worst distance from the
+/// deformed face (BoxTop - SinkMm) and the mean signed one (positive: too high).
+void measureTopFace(const DeformationField& f, double& worst, double& meanSigned)
+{
+  const auto size = f.field->GetLargestPossibleRegion().GetSize();
+  worst = 0;
+  double sum = 0;
+  std::size_t columns = 0;
+  for (long j = 0; j < long(size[1]); ++j) {
+    for (long i = 0; i < long(size[0]); ++i) {
+      PhysicalPoint y;
+      f.field->TransformIndexToPhysicalPoint({{i, j, 0}}, y);
+      if (std::abs(y[0] - 1.0) > 10 || std::abs(y[1] - 1.0) > 10) continue;
+      const double error = shownTopFace(f, i, j) - (BoxTop - SinkMm);
+      worst = std::max(worst, std::abs(error));
+      sum += error;
+      ++columns;
+    }
+  }
+  BS_CHECK_MSG(columns > 100, columns << " columns measured");
+  meanSigned = sum / double(columns);
+}
+} // namespace
+
+int DeformationFieldBoundaryTest(int, char*[])
+{
+  return brainshift::testing::runTest("DeformationFieldBoundaryTest", [] {
+    const vtkSmartPointer<vtkUnstructuredGrid> mesh = kuhnBox();
+    vtkNew<vtkDoubleArray> displacement;
+    displacement->SetName("Displacement");
+    displacement->SetNumberOfComponents(3);
+    for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) {
+      double x[3];
+      mesh->GetPoint(i, x);
+      const double u[3] = {0.0, 0.0, -SinkMm * (x[2] - BoxBottom) / (BoxTop - BoxBottom)};
+      displacement->InsertNextTuple(u);
+    }
+    mesh->GetPointData()->AddArray(displacement);
+    double bounds[6];
+    mesh->GetBounds(bounds);
+    const auto identity = itk::IdentityTransform<double, 3>::New();
+    const ImageGeometry grid = brainshift::testing::grid({{60, 60, 28}}, {1.0, 1.0, 2.5}, point(-29, -29, -29.5));
+
+    const DeformationField continued = intraopToPreopField(mesh, *identity, grid, {}, "mesh.vtu");
+    DeformationFieldParameters fadeOnly;
+    fadeOnly.continuationMaximumMm = 0;
+    const DeformationField faded = intraopToPreopField(mesh, *identity, grid, fadeOnly, "mesh.vtu");
+    double worstContinued = 0, meanContinued = 0, worstFaded = 0, meanFaded = 0;
+    measureTopFace(continued, worstContinued, meanContinued);
+    measureTopFace(faded, worstFaded, meanFaded);
+    std::cout << "shown top face, continued: worst " << worstContinued << " mm, mean " << meanContinued << " mm (band "
+              << continued.continuationBandMm << " mm, " << continued.continuedVoxels << " voxels, " << continued.foldedVoxels
+              << " folded, min Jacobian " << continued.minimumJacobian << "); fade alone: worst " << worstFaded << " mm, mean "
+              << meanFaded << " mm (" << faded.foldedVoxels << " folded)\n";
+    BS_CHECK_MSG(worstContinued < 0.5, "the continued field shows the sunken face " << worstContinued << " mm off");
+    BS_CHECK_MSG(meanFaded > 1.0, "the fade alone shows the face only " << meanFaded << " mm too high: the test no longer tells");
+    BS_CHECK(continued.continuationBandMm >= 3.0 && continued.continuationBandMm <= 15.0);
+    BS_CHECK(continued.continuedVoxels > 1000 && faded.continuedVoxels == 0);
+    BS_CHECK_MSG(continued.foldedVoxels == 0 && continued.minimumJacobian > 0.1, continued.foldedVoxels << " folded, min "
+                                                                                  << continued.minimumJacobian);
+    BS_CHECK(faded.foldedVoxels == 0);
+  });
+}
