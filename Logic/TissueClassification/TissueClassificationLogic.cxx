@@ -73,8 +73,13 @@ public:
       origin_[r] = image.GetOrigin()[r];
     }
   }
-  /// Trilinear; beyond the grid, the value at the nearest border voxel.
-  float operator()(const double p[3]) const
+  /// Where a point falls on the grid: the first corner's offset and the eight corners' weights
+  /// (zero for a corner beyond a one-voxel-thin axis). The same for every map on this grid.
+  struct Cell {
+    std::size_t first = 0;
+    double weight[8];
+  };
+  Cell cellAt(const double p[3]) const
   {
     double c[3];
     for (int r = 0; r < 3; ++r) {
@@ -87,17 +92,40 @@ public:
       b[r] = std::min<std::size_t>(std::size_t(c[r]), size_[r] >= 2 ? size_[r] - 2 : 0);
       f[r] = size_[r] >= 2 ? c[r] - double(b[r]) : 0.0;
     }
-    double v = 0;
+    Cell cell;
+    cell.first = b[0] + size_[0] * (b[1] + size_[1] * b[2]);
     for (int corner = 0; corner < 8; ++corner) {
       const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
-      if ((dx && size_[0] < 2) || (dy && size_[1] < 2) || (dz && size_[2] < 2)) continue;
-      const double w = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
-      v += w * data_[(b[0] + dx) + size_[0] * ((b[1] + dy) + size_[1] * (b[2] + dz))];
+      const bool beyond = (dx && size_[0] < 2) || (dy && size_[1] < 2) || (dz && size_[2] < 2);
+      cell.weight[corner] = beyond ? 0.0 : (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    }
+    return cell;
+  }
+  /// Trilinear at a cell of this grid (cellAt of this sampler or of one on the same grid).
+  float operator()(const Cell& cell) const
+  {
+    double v = 0;
+    for (int corner = 0; corner < 8; ++corner) {
+      if (cell.weight[corner] == 0.0 && isBeyond(corner)) continue;
+      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+      v += cell.weight[corner] * data_[cell.first + std::size_t(dx) + size_[0] * (std::size_t(dy) + size_[1] * std::size_t(dz))];
     }
     return float(v);
   }
+  /// Trilinear; beyond the grid, the value at the nearest border voxel.
+  float operator()(const double p[3]) const { return (*this)(cellAt(p)); }
+  /// Whether `other` samples the same grid (the same cells for the same points).
+  bool sameGrid(const DistanceSampler& other) const
+  {
+    return size_ == other.size_ && ImageGeometry::of(&image_).sameGridAs(ImageGeometry::of(&other.image_));
+  }
 
 private:
+  bool isBeyond(int corner) const
+  {
+    const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+    return (dx && size_[0] < 2) || (dy && size_[1] < 2) || (dz && size_[2] < 2);
+  }
   const ScalarImage& image_;
   ScalarImage::SizeType size_;
   const float* data_;
@@ -611,13 +639,18 @@ void sampleAlignedDistances(ClassificationWork& w, const SpatialTransform& rigid
   w.signedDistances.assign(w.N * T, 0.0f);
   w.head.assign(w.N, 0);
   const std::size_t backgroundSlot = 0; // tissues are sorted; 0 is background
+  // The maps share one grid (preparePreoperativeTissueMaps): a voxel's cell is found once.
+  bool oneGrid = !samplers.empty();
+  for (const DistanceSampler& sampler : samplers) oneGrid = oneGrid && sampler.sameGrid(samplers.front());
   parallelRanges(w.N, [&](std::size_t begin, std::size_t end, unsigned) {
     double x[3];
     for (std::size_t i = begin; i < end; ++i) {
       const double ii = double(i % size[0]), j = double((i / size[0]) % size[1]), k = double(i / (size[0] * size[1]));
       for (int r = 0; r < 3; ++r) x[r] = b[r] + A[r][0] * ii + A[r][1] * j + A[r][2] * k;
+      const DistanceSampler::Cell cell = oneGrid ? samplers.front().cellAt(x) : DistanceSampler::Cell{};
       for (std::size_t t = 0; t < T; ++t) {
-        w.signedDistances[i * T + t] = std::clamp(samplers[t](x), float(-w.P.saturationMm), float(w.P.saturationMm));
+        const float d = oneGrid ? samplers[t](cell) : samplers[t](x);
+        w.signedDistances[i * T + t] = std::clamp(d, float(-w.P.saturationMm), float(w.P.saturationMm));
       }
       w.head[i] = w.signedDistances[i * T + backgroundSlot] > 0.0f;
     }
