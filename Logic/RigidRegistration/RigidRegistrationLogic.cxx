@@ -16,6 +16,7 @@
 #include <itkVersorRigid3DTransform.h>
 
 #include <algorithm>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <cmath>
@@ -214,9 +215,11 @@ unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iter
   return optimizer->GetCurrentIteration();
 }
 
-/// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask.
+/// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask: the fixed image
+/// at each point against the moving image where `toMoving` takes it.
 double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points,
-                                   const Transform& transform, const MaskObject* mask, unsigned bins, double& overlap)
+                                   const std::function<PhysicalPoint(const PhysicalPoint&)>& toMoving, const MaskObject* mask,
+                                   unsigned bins, double& overlap)
 {
   auto fixedInterpolator = Interpolator::New();
   fixedInterpolator->SetInputImage(&fixed);
@@ -228,7 +231,7 @@ double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& 
   const std::size_t n = points.GetNumberOfPoints();
   for (std::size_t i = 0; i < n; ++i) {
     const PhysicalPoint p = points.GetPoint(i);
-    const PhysicalPoint q = transform.TransformPoint(p);
+    const PhysicalPoint q = toMoving(p);
     if (!movingInterpolator->IsInsideBuffer(q) || !fixedInterpolator->IsInsideBuffer(p)) continue;
     if (mask && !mask->IsInsideInWorldSpace(q)) continue;
     const unsigned a = std::min(bins - 1, unsigned(std::max(0.0, fixedInterpolator->Evaluate(p) / fixedMax) * bins));
@@ -365,6 +368,9 @@ void RigidRegistrationParameters::validate() const
   }
   if (histogramBins < 8 || histogramBins > 256) throw InputError("rigid registration: histogram bins must be 8 to 256");
   if (startAnglesDegrees.empty() || startsOptimized == 0) throw InputError("rigid registration: no start to try");
+  if (!(baselineDisplacementMm > 0) || !(baselineDisplacementDegrees > 0) || !(minimumNormalizedMutualInformationGain >= 0)) {
+    throw InputError("rigid registration: the displaced poses need a positive displacement and the gain a limit of at least 0");
+  }
   if (minimumVoxelsPerAxis < 2 || minimumValidSamples < 10) {
     throw InputError("rigid registration: at least 2 voxels per axis and 10 valid samples are needed");
   }
@@ -563,6 +569,50 @@ unsigned optimizeFromBestStarts(LevelMetric& metric, Transform& transform, const
   return bestIterations;
 }
 
+/// What the images share at poses known to be wrong, so that the trust does not rest on what one
+/// contrast gives: the normalized mutual information of the same samples with the result displaced
+/// by the baseline translation along, and rotation about, each axis through the transform's centre,
+/// both ways (12 poses; those where fewer than minimumValidSamples land are left out). Their
+/// highest and mean, and the result's gain over the highest: (NMI - 1) / (displaced - 1).
+void measureDisplacedBaseline(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points, const Transform& result,
+                              const MaskObject* mask, const RigidRegistrationParameters& parameters, RigidRegistrationResult& out)
+{
+  double highest = 1.0, sum = 0;
+  unsigned compared = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (double sign : {-1.0, 1.0}) {
+      for (bool rotate : {false, true}) {
+        auto displacement = itk::Euler3DTransform<double>::New();
+        displacement->SetCenter(result.GetCenter());
+        if (rotate) {
+          double angles[3] = {0, 0, 0};
+          angles[axis] = sign * parameters.baselineDisplacementDegrees / Degrees;
+          displacement->SetRotation(angles[0], angles[1], angles[2]);
+        } else {
+          itk::Euler3DTransform<double>::OutputVectorType shift{};
+          shift[axis] = sign * parameters.baselineDisplacementMm;
+          displacement->SetTranslation(shift);
+        }
+        double overlap = 0;
+        const double nmi = normalizedMutualInformation(
+          fixed, moving, points, [&](const PhysicalPoint& p) { return result.TransformPoint(displacement->TransformPoint(p)); }, mask,
+          parameters.histogramBins, overlap);
+        if (overlap * double(points.GetNumberOfPoints()) < parameters.minimumValidSamples) continue;
+        highest = std::max(highest, nmi);
+        sum += nmi;
+        ++compared;
+      }
+    }
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  out.displacedPosesCompared = compared;
+  out.displacedNormalizedMutualInformation = compared ? highest : nan;
+  out.displacedNormalizedMutualInformationMean = compared ? sum / compared : nan;
+  // Both figures measure information above none (1); a baseline of exactly 1 shares nothing.
+  out.normalizedMutualInformationGain =
+    compared ? (out.normalizedMutualInformation - 1.0) / std::max(1e-6, highest - 1.0) : nan;
+}
+
 /// Each level of the pyramid, coarsest first, optimizes `transform` further; the finest level's
 /// metric, valid samples, normalized mutual information and overlap go into `result`.
 void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& moving, Transform* transform,
@@ -584,8 +634,10 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
       result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
-      result.normalizedMutualInformation = normalizedMutualInformation(*fixed.levels[level], *moving.levels[level], *points,
-                                                                       *transform, moving.mask, parameters.histogramBins, result.overlap);
+      result.normalizedMutualInformation = normalizedMutualInformation(
+        *fixed.levels[level], *moving.levels[level], *points, [&](const PhysicalPoint& p) { return transform->TransformPoint(p); },
+        moving.mask, parameters.histogramBins, result.overlap);
+      measureDisplacedBaseline(*fixed.levels[level], *moving.levels[level], *points, *transform, moving.mask, parameters, result);
     }
   }
 }
@@ -599,16 +651,24 @@ std::string untrustworthyBecause(const RigidRegistrationResult& result, const Ri
         << "mutual information needs at least " << parameters.minimumValidSamples << " to be meaningful";
   } else if (result.overlap < parameters.minimumOverlap) {
     why << "only " << int(100 * result.overlap) << " % of the intraoperative foreground lands on the preoperative head";
-  } else if (result.normalizedMutualInformation < parameters.minimumNormalizedMutualInformation) {
-    why << "normalized mutual information " << result.normalizedMutualInformation << " is below "
-        << parameters.minimumNormalizedMutualInformation << ", far from what an alignment of these images gives";
+  } else if (result.displacedPosesCompared == 0) {
+    why << "no pose displaced by " << parameters.baselineDisplacementMm << " mm or " << parameters.baselineDisplacementDegrees
+        << " degrees from the result keeps " << parameters.minimumValidSamples
+        << " samples on the preoperative image, so its normalized mutual information " << result.normalizedMutualInformation
+        << " cannot be told from a wrong pose's";
+  } else if (!(result.normalizedMutualInformationGain >= parameters.minimumNormalizedMutualInformationGain)) {
+    why << "normalized mutual information " << result.normalizedMutualInformation << " is only "
+        << result.normalizedMutualInformationGain << " times as far above 1 as the "
+        << result.displacedNormalizedMutualInformation << " of the best pose displaced by " << parameters.baselineDisplacementMm
+        << " mm or " << parameters.baselineDisplacementDegrees << " degrees; an alignment of these images gives at least "
+        << parameters.minimumNormalizedMutualInformationGain << " times";
   } else if (result.rotationDegrees > parameters.maximumRotationDegrees) {
     why << "a rotation of " << result.rotationDegrees << " degrees is implausible for a head in the scanner";
   }
   return why.str();
 }
 
-/// Warnings on a trusted result whose overlap, mutual information or rotation is near the limits.
+/// Warnings on a trusted result whose overlap, mutual information gain or rotation is near the limits.
 void warnAboutDoubtfulAlignment(RigidRegistrationResult& result, const RigidRegistrationParameters& parameters)
 {
   if (result.overlap < parameters.warningOverlap) {
@@ -616,9 +676,11 @@ void warnAboutDoubtfulAlignment(RigidRegistrationResult& result, const RigidRegi
     w << "rigid: only " << int(100 * result.overlap) << " % of the intraoperative foreground overlaps the preoperative head";
     result.warnings.push_back(w.str());
   }
-  if (result.normalizedMutualInformation < parameters.warningNormalizedMutualInformation) {
+  if (result.normalizedMutualInformationGain < parameters.warningNormalizedMutualInformationGain) {
     std::ostringstream m;
-    m << "rigid: normalized mutual information is low (" << result.normalizedMutualInformation << "); check the alignment";
+    m << "rigid: normalized mutual information " << result.normalizedMutualInformation << " is only "
+      << result.normalizedMutualInformationGain << " times as far above 1 as at the best displaced pose ("
+      << result.displacedNormalizedMutualInformation << "); check the alignment";
     result.warnings.push_back(m.str());
   }
   if (result.rotationDegrees > parameters.warningRotationDegrees) {
