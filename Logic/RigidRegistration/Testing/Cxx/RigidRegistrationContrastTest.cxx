@@ -81,10 +81,10 @@ int RigidRegistrationContrastTest(int argc, char* argv[])
 {
   const std::string mode = argc > 1 ? argv[1] : "";
   return brainshift::testing::runTest("RigidRegistrationContrastTest", [&] {
-    std::printf("| case | contrast | NMI | displaced NMI (highest) | displaced NMI (mean) | gain | head TRE mean mm | max mm | rotation error deg | trust |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
     std::vector<ContrastCase> cases;
     if (mode == "wrong") {
+      std::printf("| case | pose | optimization | NMI | displaced NMI (highest) | gain | head TRE max mm | rotation error deg | trust |\n");
+      std::printf("|---|---|---|---|---|---|---|---|---|\n");
       CaseParameters flair = scenarioOfSize("default", CaseSize::Small);
       flair.contrast = IntraopContrast::Flair;
       reportWrongPoses("default t1", scenarioOfSize("default", CaseSize::Small));
@@ -93,6 +93,8 @@ int RigidRegistrationContrastTest(int argc, char* argv[])
       reportWrongPoses("lp15-slab-intact", scenarioOfSize("lp15-slab-intact", CaseSize::Small));
       return;
     }
+    std::printf("| case | contrast | NMI | displaced NMI (highest) | displaced NMI (mean) | gain | head TRE mean mm | max mm | rotation error deg | trust |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
     if (mode == "full" || mode == "small-all") {
       const CaseSize size = mode == "full" ? CaseSize::Full : CaseSize::Small;
       for (const CaseScenario& s : caseScenarios()) {
