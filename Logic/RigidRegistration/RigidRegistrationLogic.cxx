@@ -215,27 +215,56 @@ unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iter
   return optimizer->GetCurrentIteration();
 }
 
+/// The finest level's samples, on which the result's mutual information is judged: their points,
+/// each one's bin of the fixed image (-1 outside it), and the moving image; the histograms span 0
+/// to each image's maximum.
+struct JudgedSamples {
+  std::vector<PhysicalPoint> points;
+  std::vector<int> fixedBins;
+  const ScalarImage* moving = nullptr;
+  double movingMax = 1;
+  const MaskObject* mask = nullptr;
+  unsigned bins = 32;
+};
+
+JudgedSamples judgedSamples(const ScalarImage& fixed, double fixedMax, const ScalarImage& moving, double movingMax,
+                            const PointSet& points, const MaskObject* mask, unsigned bins)
+{
+  JudgedSamples s;
+  s.moving = &moving;
+  s.movingMax = movingMax;
+  s.mask = mask;
+  s.bins = bins;
+  auto interpolator = Interpolator::New();
+  interpolator->SetInputImage(&fixed);
+  for (std::size_t i = 0, n = points.GetNumberOfPoints(); i < n; ++i) {
+    const PhysicalPoint p = points.GetPoint(i);
+    s.points.push_back(p);
+    s.fixedBins.push_back(interpolator->IsInsideBuffer(p)
+                            ? int(std::min(bins - 1, unsigned(std::max(0.0, interpolator->Evaluate(p) / fixedMax) * bins)))
+                            : -1);
+  }
+  return s;
+}
+
 /// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask: the fixed image
 /// at each point against the moving image where `toMoving` takes it.
-double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points,
-                                   const std::function<PhysicalPoint(const PhysicalPoint&)>& toMoving, const MaskObject* mask,
-                                   unsigned bins, double& overlap)
+double normalizedMutualInformation(const JudgedSamples& s, const std::function<PhysicalPoint(const PhysicalPoint&)>& toMoving,
+                                   double& overlap)
 {
-  auto fixedInterpolator = Interpolator::New();
-  fixedInterpolator->SetInputImage(&fixed);
+  const unsigned bins = s.bins;
   auto movingInterpolator = Interpolator::New();
-  movingInterpolator->SetInputImage(&moving);
-  const double fixedMax = maximumOf(fixed), movingMax = maximumOf(moving);
+  movingInterpolator->SetInputImage(s.moving);
   std::vector<double> joint(bins * bins, 0.0), f(bins, 0.0), m(bins, 0.0);
   double total = 0;
-  const std::size_t n = points.GetNumberOfPoints();
+  const std::size_t n = s.points.size();
   for (std::size_t i = 0; i < n; ++i) {
-    const PhysicalPoint p = points.GetPoint(i);
-    const PhysicalPoint q = toMoving(p);
-    if (!movingInterpolator->IsInsideBuffer(q) || !fixedInterpolator->IsInsideBuffer(p)) continue;
-    if (mask && !mask->IsInsideInWorldSpace(q)) continue;
-    const unsigned a = std::min(bins - 1, unsigned(std::max(0.0, fixedInterpolator->Evaluate(p) / fixedMax) * bins));
-    const unsigned b = std::min(bins - 1, unsigned(std::max(0.0, movingInterpolator->Evaluate(q) / movingMax) * bins));
+    if (s.fixedBins[i] < 0) continue;
+    const PhysicalPoint q = toMoving(s.points[i]);
+    if (!movingInterpolator->IsInsideBuffer(q)) continue;
+    if (s.mask && !s.mask->IsInsideInWorldSpace(q)) continue;
+    const unsigned a = unsigned(s.fixedBins[i]);
+    const unsigned b = std::min(bins - 1, unsigned(std::max(0.0, movingInterpolator->Evaluate(q) / s.movingMax) * bins));
     joint[a * bins + b] += 1;
     total += 1;
   }
@@ -397,6 +426,7 @@ public:
   std::vector<double> levelSpacingMm;
   double maskDilationMm = 0;
   std::vector<ScalarImage::Pointer> levels; ///< coarsest first
+  std::vector<double> maxima;               ///< of each level
   double threshold = 0;                     ///< foreground, from the coarsest level
   MaskObject::Pointer mask;                 ///< null without labels
 };
@@ -411,7 +441,10 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
   prepared->labels = preopLabels;
   prepared->levelSpacingMm = parameters.levelSpacingMm;
   prepared->maskDilationMm = parameters.maskDilationMm;
-  for (double spacing : parameters.levelSpacingMm) prepared->levels.push_back(shrinkTo(preop, spacing));
+  for (double spacing : parameters.levelSpacingMm) {
+    prepared->levels.push_back(shrinkTo(preop, spacing));
+    prepared->maxima.push_back(maximumOf(*prepared->levels.back()));
+  }
   prepared->threshold = foregroundThreshold(*prepared->levels.front());
   requireForegroundExtent(*prepared->levels.front(), prepared->threshold, "preoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
@@ -440,6 +473,7 @@ std::shared_ptr<const PreparedRigidMoving> preparedMovingFor(const ScalarImage& 
 /// small, with too little foreground or a flat one.
 struct FixedPyramid {
   std::vector<ScalarImage::Pointer> levels;
+  std::vector<double> maxima; ///< of each level
   double threshold = 0;
 };
 
@@ -447,7 +481,10 @@ FixedPyramid fixedPyramidOf(const ScalarImage& intraop, const RigidRegistrationP
 {
   requireRegistrableImage(intraop, "intraoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
   FixedPyramid pyramid;
-  for (double spacing : parameters.levelSpacingMm) pyramid.levels.push_back(shrinkTo(intraop, spacing));
+  for (double spacing : parameters.levelSpacingMm) {
+    pyramid.levels.push_back(shrinkTo(intraop, spacing));
+    pyramid.maxima.push_back(maximumOf(*pyramid.levels.back()));
+  }
   pyramid.threshold = foregroundThreshold(*pyramid.levels.front());
   requireForegroundExtent(*pyramid.levels.front(), pyramid.threshold, "intraoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
@@ -574,35 +611,37 @@ unsigned optimizeFromBestStarts(LevelMetric& metric, Transform& transform, const
 /// by the baseline translation along, and rotation about, each axis through the transform's centre,
 /// both ways (12 poses; those where fewer than minimumValidSamples land are left out). Their
 /// highest and mean, and the result's gain over the highest: (NMI - 1) / (displaced - 1).
-void measureDisplacedBaseline(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points, const Transform& result,
-                              const MaskObject* mask, const RigidRegistrationParameters& parameters, RigidRegistrationResult& out)
+void measureDisplacedBaseline(const JudgedSamples& samples, const Transform& result, const RigidRegistrationParameters& parameters,
+                              RigidRegistrationResult& out)
 {
+  // Poses 0 to 11: axis (pose / 4), way (pose / 2 % 2), translation or rotation (pose % 2); each
+  // measured on its own (in parallel), gathered in order.
+  std::array<double, 12> nmis{}, overlaps{};
+  auto measure = [&](itk::SizeValueType pose) {
+    const int axis = int(pose / 4);
+    const double sign = (pose / 2) % 2 ? 1.0 : -1.0;
+    auto displacement = itk::Euler3DTransform<double>::New();
+    displacement->SetCenter(result.GetCenter());
+    if (pose % 2) {
+      double angles[3] = {0, 0, 0};
+      angles[axis] = sign * parameters.baselineDisplacementDegrees / Degrees;
+      displacement->SetRotation(angles[0], angles[1], angles[2]);
+    } else {
+      itk::Euler3DTransform<double>::OutputVectorType shift{};
+      shift[axis] = sign * parameters.baselineDisplacementMm;
+      displacement->SetTranslation(shift);
+    }
+    nmis[pose] = normalizedMutualInformation(
+      samples, [&](const PhysicalPoint& p) { return result.TransformPoint(displacement->TransformPoint(p)); }, overlaps[pose]);
+  };
+  itk::MultiThreaderBase::New()->ParallelizeArray(0, itk::SizeValueType(nmis.size()), measure, nullptr);
   double highest = 1.0, sum = 0;
   unsigned compared = 0;
-  for (int axis = 0; axis < 3; ++axis) {
-    for (double sign : {-1.0, 1.0}) {
-      for (bool rotate : {false, true}) {
-        auto displacement = itk::Euler3DTransform<double>::New();
-        displacement->SetCenter(result.GetCenter());
-        if (rotate) {
-          double angles[3] = {0, 0, 0};
-          angles[axis] = sign * parameters.baselineDisplacementDegrees / Degrees;
-          displacement->SetRotation(angles[0], angles[1], angles[2]);
-        } else {
-          itk::Euler3DTransform<double>::OutputVectorType shift{};
-          shift[axis] = sign * parameters.baselineDisplacementMm;
-          displacement->SetTranslation(shift);
-        }
-        double overlap = 0;
-        const double nmi = normalizedMutualInformation(
-          fixed, moving, points, [&](const PhysicalPoint& p) { return result.TransformPoint(displacement->TransformPoint(p)); }, mask,
-          parameters.histogramBins, overlap);
-        if (overlap * double(points.GetNumberOfPoints()) < parameters.minimumValidSamples) continue;
-        highest = std::max(highest, nmi);
-        sum += nmi;
-        ++compared;
-      }
-    }
+  for (std::size_t pose = 0; pose < nmis.size(); ++pose) {
+    if (overlaps[pose] * double(samples.points.size()) < parameters.minimumValidSamples) continue;
+    highest = std::max(highest, nmis[pose]);
+    sum += nmis[pose];
+    ++compared;
   }
   const double nan = std::numeric_limits<double>::quiet_NaN();
   out.displacedPosesCompared = compared;
@@ -634,10 +673,11 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
       result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
-      result.normalizedMutualInformation = normalizedMutualInformation(
-        *fixed.levels[level], *moving.levels[level], *points, [&](const PhysicalPoint& p) { return transform->TransformPoint(p); },
-        moving.mask, parameters.histogramBins, result.overlap);
-      measureDisplacedBaseline(*fixed.levels[level], *moving.levels[level], *points, *transform, moving.mask, parameters, result);
+      const JudgedSamples samples = judgedSamples(*fixed.levels[level], fixed.maxima[level], *moving.levels[level],
+                                                  moving.maxima[level], *points, moving.mask, parameters.histogramBins);
+      result.normalizedMutualInformation =
+        normalizedMutualInformation(samples, [&](const PhysicalPoint& p) { return transform->TransformPoint(p); }, result.overlap);
+      measureDisplacedBaseline(samples, *transform, parameters, result);
     }
   }
 }
