@@ -8,6 +8,7 @@
 #include <itkCommand.h>
 #include <itkEuler3DTransform.h>
 #include <itkImageMaskSpatialObject.h>
+#include <itkImageRegionConstIteratorWithIndex.h>
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkMattesMutualInformationImageToImageMetricv4.h>
 #include <itkMultiThreaderBase.h>
@@ -144,6 +145,24 @@ MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
   return object;
 }
 
+/// Whether `mask` leaves the intensity range of `image` whole: the lowest and highest voxel inside
+/// it (found as ITK's Mattes metric finds them) are those of the whole image.
+bool maskKeepsIntensityRange(const ScalarImage& image, const MaskObject& mask)
+{
+  const float* v = image.GetBufferPointer();
+  const auto whole = std::minmax_element(v, v + image.GetLargestPossibleRegion().GetNumberOfPixels());
+  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
+  itk::ImageRegionConstIteratorWithIndex<ScalarImage> it(&image, image.GetBufferedRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint p;
+    image.TransformIndexToPhysicalPoint(it.GetIndex(), p);
+    if (!mask.IsInsideInWorldSpace(p)) continue;
+    lowest = std::min(lowest, it.Get());
+    highest = std::max(highest, it.Get());
+  }
+  return lowest == *whole.first && highest == *whole.second;
+}
+
 struct LevelMetric {
   Metric::Pointer metric;
   PointSet::Pointer points;
@@ -165,7 +184,10 @@ Metric::Pointer newDeterministicMetric()
   return metric;
 }
 
-LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points, const MaskObject* mask,
+/// The metric of one level. The moving mask limits the samples and, as the metric initializes, the
+/// moving image's histogram range, which it finds by asking the mask about every voxel (0.1 s at 1
+/// mm); when the mask is known to keep the range whole (`maskKeepsRange`), it is given after that.
+LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points, const MaskObject* mask, bool maskKeepsRange,
                        Transform* transform, unsigned bins)
 {
   LevelMetric level;
@@ -179,8 +201,9 @@ LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points
   level.metric->SetFixedSampledPointSet(points);
   level.metric->SetUseMovingImageGradientFilter(false);
   level.metric->SetUseFixedImageGradientFilter(false);
-  if (mask) level.metric->SetMovingImageMask(mask);
+  if (mask && !maskKeepsRange) level.metric->SetMovingImageMask(mask);
   level.metric->Initialize();
+  if (mask && maskKeepsRange) level.metric->SetMovingImageMask(mask);
   return level;
 }
 
@@ -429,6 +452,7 @@ public:
   std::vector<double> maxima;               ///< of each level
   double threshold = 0;                     ///< foreground, from the coarsest level
   MaskObject::Pointer mask;                 ///< null without labels
+  std::vector<bool> maskKeepsRange;         ///< of each level: maskKeepsIntensityRange
 };
 
 std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
@@ -450,6 +474,9 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
                           parameters.minimumVoxelsPerAxis);
   for (const ScalarImage::Pointer& level : prepared->levels) requireVariedForeground(*level, prepared->threshold, "preoperative");
   if (preopLabels) prepared->mask = movingMaskFrom(*preopLabels, parameters.maskDilationMm);
+  for (const ScalarImage::Pointer& level : prepared->levels) {
+    prepared->maskKeepsRange.push_back(prepared->mask && maskKeepsIntensityRange(*level, *prepared->mask));
+  }
   return prepared;
 }
 
@@ -662,7 +689,8 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     throwIfCancelled(parameters.cancel, "rigid registration");
     PointSet::Pointer points = sampleForeground(*fixed.levels[level], fixed.threshold, parameters.samplesPerLevel[level],
                                                 parameters.seed + level);
-    LevelMetric metric = makeMetric(fixed.levels[level], moving.levels[level], points, moving.mask, transform, parameters.histogramBins);
+    LevelMetric metric = makeMetric(fixed.levels[level], moving.levels[level], points, moving.mask, moving.maskKeepsRange[level],
+                                    transform, parameters.histogramBins);
     if (level == 0 && !parameters.initialIntraopToPreop) {
       result.iterationsPerLevel.push_back(optimizeFromBestStarts(metric, *transform, parameters, result));
     } else {

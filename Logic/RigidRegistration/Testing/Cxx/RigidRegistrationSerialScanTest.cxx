@@ -54,6 +54,10 @@ int RigidRegistrationSerialScanTest(int argc, char* argv[])
         std::printf("shift %g mm, from the previous scan: head TRE mean %.3f max %.3f mm, iterations %u %u %u, gain %.2f, %.3f s\n",
                     shift, laterHead.meanMm, laterHead.maxMm, later.iterationsPerLevel[0], later.iterationsPerLevel[1],
                     later.iterationsPerLevel[2], later.normalizedMutualInformationGain, laterSeconds);
+        const auto parametersFound = later.intraopToPreop->GetParameters();
+        std::printf("  parameters");
+        for (unsigned i = 0; i < parametersFound.size(); ++i) std::printf(" %.17g", parametersFound[i]);
+        std::printf("\n");
         std::fflush(stdout);
         if (!full) {
           BS_CHECK_MSG(later.trustworthy, later.failureReason);
