@@ -120,6 +120,32 @@ PointSet::Pointer sampleForeground(const ScalarImage& image, double threshold, u
   return points;
 }
 
+/// The preoperative mask as the metric asks it, once per sample and iteration: the answer of
+/// ImageMaskSpatialObject (whose object space is the world's here: no transform is ever set on it)
+/// without the identity transform to object space, the name test and the virtual calls it makes
+/// on every question.
+class PreoperativeMask : public MaskObject {
+public:
+  ITK_DISALLOW_COPY_AND_MOVE(PreoperativeMask);
+  using Self = PreoperativeMask;
+  using Superclass = MaskObject;
+  using Pointer = itk::SmartPointer<Self>;
+  itkNewMacro(Self);
+  itkTypeMacro(PreoperativeMask, ImageMaskSpatialObject);
+
+  bool IsInsideInWorldSpace(const PointType& point, unsigned int depth = 0, const std::string& name = "") const override
+  {
+    if (depth > 0 || !name.empty()) return Superclass::IsInsideInWorldSpace(point, depth, name);
+    const ImageType* image = GetImage();
+    const IndexType index = image->TransformPhysicalPointToIndex(point);
+    return image->GetBufferedRegion().IsInside(index) && image->GetPixel(index) != 0;
+  }
+
+protected:
+  PreoperativeMask() = default;
+  ~PreoperativeMask() override = default;
+};
+
 /// The preoperative head and brain (labels >= 1), dilated, at 2 mm: where the metric may look.
 MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
 {
@@ -139,10 +165,10 @@ MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
   for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = coarse->GetBufferPointer()[i] > 0.0f;
   const ScalarImage::Pointer distance = signedDistanceMm(binary);
   for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = distance->GetBufferPointer()[i] <= dilationMm;
-  auto object = MaskObject::New();
+  auto object = PreoperativeMask::New();
   object->SetImage(binary);
   object->Update();
-  return object;
+  return object.GetPointer();
 }
 
 /// Whether `mask` leaves the intensity range of `image` whole: the lowest and highest voxel inside
