@@ -50,12 +50,14 @@ struct RigidRegistrationParameters {
   /// samples at 12 poses displaced from it by this much along and about each axis: what these very
   /// images share at a wrong pose, whatever their contrasts.
   double baselineDisplacementMm = 15.0, baselineDisplacementDegrees = 15.0;
-  // The gain (NMI - 1) / (displaced NMI - 1). Calibrated (Testing/Benchmarks/rigid/contrast.md) on
-  // every built-in scenario, T1, low-field T1, T2, FLAIR, T1 post-contrast and slabs: right
-  // alignments give 3.8 to 5.9 on the small case and 6.7 to 9.0 at full size; gross failures and
-  // unrelated images 0.98 to 1.3, poses 5 to 20 degrees off 0.3 to 1.7, partly recovered ones 4 to 13
-  // mm off 1.0 to 3.2. (The NMI itself is 1.10 to 1.33 at right alignments: 1.10 for FLAIR, 1.14 for
-  // T2, so no absolute floor serves every contrast.)
+  // The gain (NMI - 1) / (displaced NMI - 1). Calibrated (Testing/Benchmarks/results/rigid/contrast.md)
+  // on every built-in scenario, T1, low-field T1, T2, FLAIR, T1 post-contrast and slabs: right
+  // alignments give 3.8 to 5.9 on the small case and 5.6 to 9.5 at full size; gross failures
+  // (upside down, turned round) and unrelated images 0.98 to 1.3, poses 5 to 20 degrees off 0.3 to
+  // 1.7. Poses 2 to 7 mm off that the finest level left half recovered still gave 2.6 to 4.9: this
+  // figure, like the NMI before it, catches wrong optima and gross failures, not millimetres. (The
+  // NMI itself is 1.10 to 1.33 at right alignments, 1.10 for FLAIR and 1.14 for T2 on the small case,
+  // so no absolute floor serves every contrast.)
   double minimumNormalizedMutualInformationGain = 2.5, warningNormalizedMutualInformationGain = 3.3;
   double warningRotationDegrees = 45.0, maximumRotationDegrees = 90.0;
   /// Too little to register (InputError): each image, and the intraoperative foreground, must span
