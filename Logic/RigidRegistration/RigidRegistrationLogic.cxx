@@ -5,9 +5,11 @@
 #include "LibraryMessages.h"
 
 #include <itkBinShrinkImageFilter.h>
+#include <itkCentralDifferenceImageFunction.h>
 #include <itkCommand.h>
 #include <itkEuler3DTransform.h>
 #include <itkImageMaskSpatialObject.h>
+#include <itkImageRegionConstIteratorWithIndex.h>
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkMattesMutualInformationImageToImageMetricv4.h>
 #include <itkMultiThreaderBase.h>
@@ -16,6 +18,7 @@
 #include <itkVersorRigid3DTransform.h>
 
 #include <algorithm>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <cmath>
@@ -118,6 +121,32 @@ PointSet::Pointer sampleForeground(const ScalarImage& image, double threshold, u
   return points;
 }
 
+/// The preoperative mask as the metric asks it, once per sample and iteration: the answer of
+/// ImageMaskSpatialObject (whose object space is the world's here: no transform is ever set on it)
+/// without the identity transform to object space, the name test and the virtual calls it makes
+/// on every question.
+class PreoperativeMask : public MaskObject {
+public:
+  ITK_DISALLOW_COPY_AND_MOVE(PreoperativeMask);
+  using Self = PreoperativeMask;
+  using Superclass = MaskObject;
+  using Pointer = itk::SmartPointer<Self>;
+  itkNewMacro(Self);
+  itkTypeMacro(PreoperativeMask, ImageMaskSpatialObject);
+
+  bool IsInsideInWorldSpace(const PointType& point, unsigned int depth = 0, const std::string& name = "") const override
+  {
+    if (depth > 0 || !name.empty()) return Superclass::IsInsideInWorldSpace(point, depth, name);
+    const ImageType* image = GetImage();
+    const IndexType index = image->TransformPhysicalPointToIndex(point);
+    return image->GetBufferedRegion().IsInside(index) && image->GetPixel(index) != 0;
+  }
+
+protected:
+  PreoperativeMask() = default;
+  ~PreoperativeMask() override = default;
+};
+
 /// The preoperative head and brain (labels >= 1), dilated, at 2 mm: where the metric may look.
 MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
 {
@@ -137,11 +166,81 @@ MaskObject::Pointer movingMaskFrom(const LabelImage& labels, double dilationMm)
   for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = coarse->GetBufferPointer()[i] > 0.0f;
   const ScalarImage::Pointer distance = signedDistanceMm(binary);
   for (std::size_t i = 0; i < n; ++i) binary->GetBufferPointer()[i] = distance->GetBufferPointer()[i] <= dilationMm;
-  auto object = MaskObject::New();
+  auto object = PreoperativeMask::New();
   object->SetImage(binary);
   object->Update();
-  return object;
+  return object.GetPointer();
 }
+
+/// Whether `mask` leaves the intensity range of `image` whole: the lowest and highest voxel inside
+/// it (found as ITK's Mattes metric finds them) are those of the whole image.
+bool maskKeepsIntensityRange(const ScalarImage& image, const MaskObject& mask)
+{
+  const float* v = image.GetBufferPointer();
+  const auto whole = std::minmax_element(v, v + image.GetLargestPossibleRegion().GetNumberOfPixels());
+  float lowest = std::numeric_limits<float>::max(), highest = std::numeric_limits<float>::lowest();
+  itk::ImageRegionConstIteratorWithIndex<ScalarImage> it(&image, image.GetBufferedRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint p;
+    image.TransformIndexToPhysicalPoint(it.GetIndex(), p);
+    if (!mask.IsInsideInWorldSpace(p)) continue;
+    lowest = std::min(lowest, it.Get());
+    highest = std::max(highest, it.Get());
+  }
+  return lowest == *whole.first && highest == *whole.second;
+}
+
+/// The moving image's gradient exactly as ITK's metric computes it by default (central differences
+/// of linear interpolation half a voxel either side, zero where a neighbour leaves the buffer), with
+/// each neighbour's continuous index computed once instead of twice and the interpolation called
+/// directly: the gradient takes six of the metric's eight interpolations per sample.
+class MovingImageGradient : public itk::CentralDifferenceImageFunction<ScalarImage, double> {
+public:
+  ITK_DISALLOW_COPY_AND_MOVE(MovingImageGradient);
+  using Self = MovingImageGradient;
+  using Superclass = itk::CentralDifferenceImageFunction<ScalarImage, double>;
+  using Pointer = itk::SmartPointer<Self>;
+  itkNewMacro(Self);
+  itkTypeMacro(MovingImageGradient, CentralDifferenceImageFunction);
+
+  void SetInputImage(const ScalarImage* image) override
+  {
+    Superclass::SetInputImage(image);
+    linear->SetInputImage(image);
+  }
+
+  OutputType Evaluate(const PointType& point) const override
+  {
+    if (!this->GetUseImageDirection()) return Superclass::Evaluate(point);
+    const ScalarImage* image = this->GetInputImage();
+    OutputType derivative;
+    for (unsigned dim = 0; dim < 3; ++dim) {
+      derivative[dim] = 0.0;
+      const double offset = 0.5 * image->GetSpacing()[dim];
+      PointType below = point, above = point;
+      below[dim] = point[dim] - offset;
+      above[dim] = point[dim] + offset;
+      ContinuousIndexType low, high;
+      image->TransformPhysicalPointToContinuousIndex(below, low);
+      if (!this->ImageFunction::IsInsideBuffer(low)) continue;
+      image->TransformPhysicalPointToContinuousIndex(above, high);
+      if (!this->ImageFunction::IsInsideBuffer(high)) continue;
+      const double delta = above[dim] - below[dim];
+      if (delta > 10.0 * std::numeric_limits<double>::epsilon()) {
+        derivative[dim] =
+          (linear->Interpolator::EvaluateAtContinuousIndex(high) - linear->Interpolator::EvaluateAtContinuousIndex(low)) / delta;
+      }
+    }
+    return derivative;
+  }
+
+protected:
+  MovingImageGradient() { this->UseImageDirectionOn(); }
+  ~MovingImageGradient() override = default;
+
+private:
+  Interpolator::Pointer linear = Interpolator::New();
+};
 
 struct LevelMetric {
   Metric::Pointer metric;
@@ -164,7 +263,10 @@ Metric::Pointer newDeterministicMetric()
   return metric;
 }
 
-LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points, const MaskObject* mask,
+/// The metric of one level. The moving mask limits the samples and, as the metric initializes, the
+/// moving image's histogram range, which it finds by asking the mask about every voxel (0.1 s at 1
+/// mm); when the mask is known to keep the range whole (`maskKeepsRange`), it is given after that.
+LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points, const MaskObject* mask, bool maskKeepsRange,
                        Transform* transform, unsigned bins)
 {
   LevelMetric level;
@@ -178,8 +280,10 @@ LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points
   level.metric->SetFixedSampledPointSet(points);
   level.metric->SetUseMovingImageGradientFilter(false);
   level.metric->SetUseFixedImageGradientFilter(false);
-  if (mask) level.metric->SetMovingImageMask(mask);
+  level.metric->SetMovingImageGradientCalculator(MovingImageGradient::New());
+  if (mask && !maskKeepsRange) level.metric->SetMovingImageMask(mask);
   level.metric->Initialize();
+  if (mask && maskKeepsRange) level.metric->SetMovingImageMask(mask);
   return level;
 }
 
@@ -214,25 +318,56 @@ unsigned optimize(Metric* metric, double step, double minimumStep, unsigned iter
   return optimizer->GetCurrentIteration();
 }
 
-/// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask.
-double normalizedMutualInformation(const ScalarImage& fixed, const ScalarImage& moving, const PointSet& points,
-                                   const Transform& transform, const MaskObject* mask, unsigned bins, double& overlap)
+/// The finest level's samples, on which the result's mutual information is judged: their points,
+/// each one's bin of the fixed image (-1 outside it), and the moving image; the histograms span 0
+/// to each image's maximum.
+struct JudgedSamples {
+  std::vector<PhysicalPoint> points;
+  std::vector<int> fixedBins;
+  const ScalarImage* moving = nullptr;
+  double movingMax = 1;
+  const MaskObject* mask = nullptr;
+  unsigned bins = 32;
+};
+
+JudgedSamples judgedSamples(const ScalarImage& fixed, double fixedMax, const ScalarImage& moving, double movingMax,
+                            const PointSet& points, const MaskObject* mask, unsigned bins)
 {
-  auto fixedInterpolator = Interpolator::New();
-  fixedInterpolator->SetInputImage(&fixed);
+  JudgedSamples s;
+  s.moving = &moving;
+  s.movingMax = movingMax;
+  s.mask = mask;
+  s.bins = bins;
+  auto interpolator = Interpolator::New();
+  interpolator->SetInputImage(&fixed);
+  for (std::size_t i = 0, n = points.GetNumberOfPoints(); i < n; ++i) {
+    const PhysicalPoint p = points.GetPoint(i);
+    s.points.push_back(p);
+    s.fixedBins.push_back(interpolator->IsInsideBuffer(p)
+                            ? int(std::min(bins - 1, unsigned(std::max(0.0, interpolator->Evaluate(p) / fixedMax) * bins)))
+                            : -1);
+  }
+  return s;
+}
+
+/// (H(F) + H(M)) / H(F, M) over the sampled points that land in the moving mask: the fixed image
+/// at each point against the moving image where `toMoving` takes it.
+double normalizedMutualInformation(const JudgedSamples& s, const std::function<PhysicalPoint(const PhysicalPoint&)>& toMoving,
+                                   double& overlap)
+{
+  const unsigned bins = s.bins;
   auto movingInterpolator = Interpolator::New();
-  movingInterpolator->SetInputImage(&moving);
-  const double fixedMax = maximumOf(fixed), movingMax = maximumOf(moving);
+  movingInterpolator->SetInputImage(s.moving);
   std::vector<double> joint(bins * bins, 0.0), f(bins, 0.0), m(bins, 0.0);
   double total = 0;
-  const std::size_t n = points.GetNumberOfPoints();
+  const std::size_t n = s.points.size();
   for (std::size_t i = 0; i < n; ++i) {
-    const PhysicalPoint p = points.GetPoint(i);
-    const PhysicalPoint q = transform.TransformPoint(p);
-    if (!movingInterpolator->IsInsideBuffer(q) || !fixedInterpolator->IsInsideBuffer(p)) continue;
-    if (mask && !mask->IsInsideInWorldSpace(q)) continue;
-    const unsigned a = std::min(bins - 1, unsigned(std::max(0.0, fixedInterpolator->Evaluate(p) / fixedMax) * bins));
-    const unsigned b = std::min(bins - 1, unsigned(std::max(0.0, movingInterpolator->Evaluate(q) / movingMax) * bins));
+    if (s.fixedBins[i] < 0) continue;
+    const PhysicalPoint q = toMoving(s.points[i]);
+    if (!movingInterpolator->IsInsideBuffer(q)) continue;
+    if (s.mask && !s.mask->IsInsideInWorldSpace(q)) continue;
+    const unsigned a = unsigned(s.fixedBins[i]);
+    const unsigned b = std::min(bins - 1, unsigned(std::max(0.0, movingInterpolator->Evaluate(q) / s.movingMax) * bins));
     joint[a * bins + b] += 1;
     total += 1;
   }
@@ -365,6 +500,9 @@ void RigidRegistrationParameters::validate() const
   }
   if (histogramBins < 8 || histogramBins > 256) throw InputError("rigid registration: histogram bins must be 8 to 256");
   if (startAnglesDegrees.empty() || startsOptimized == 0) throw InputError("rigid registration: no start to try");
+  if (!(baselineDisplacementMm > 0) || !(baselineDisplacementDegrees > 0) || !(minimumNormalizedMutualInformationGain >= 0)) {
+    throw InputError("rigid registration: the displaced poses need a positive displacement and the gain a limit of at least 0");
+  }
   if (minimumVoxelsPerAxis < 2 || minimumValidSamples < 10) {
     throw InputError("rigid registration: at least 2 voxels per axis and 10 valid samples are needed");
   }
@@ -391,8 +529,10 @@ public:
   std::vector<double> levelSpacingMm;
   double maskDilationMm = 0;
   std::vector<ScalarImage::Pointer> levels; ///< coarsest first
+  std::vector<double> maxima;               ///< of each level
   double threshold = 0;                     ///< foreground, from the coarsest level
   MaskObject::Pointer mask;                 ///< null without labels
+  std::vector<bool> maskKeepsRange;         ///< of each level: maskKeepsIntensityRange
 };
 
 std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
@@ -405,12 +545,18 @@ std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage&
   prepared->labels = preopLabels;
   prepared->levelSpacingMm = parameters.levelSpacingMm;
   prepared->maskDilationMm = parameters.maskDilationMm;
-  for (double spacing : parameters.levelSpacingMm) prepared->levels.push_back(shrinkTo(preop, spacing));
+  for (double spacing : parameters.levelSpacingMm) {
+    prepared->levels.push_back(shrinkTo(preop, spacing));
+    prepared->maxima.push_back(maximumOf(*prepared->levels.back()));
+  }
   prepared->threshold = foregroundThreshold(*prepared->levels.front());
   requireForegroundExtent(*prepared->levels.front(), prepared->threshold, "preoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
   for (const ScalarImage::Pointer& level : prepared->levels) requireVariedForeground(*level, prepared->threshold, "preoperative");
   if (preopLabels) prepared->mask = movingMaskFrom(*preopLabels, parameters.maskDilationMm);
+  for (const ScalarImage::Pointer& level : prepared->levels) {
+    prepared->maskKeepsRange.push_back(prepared->mask && maskKeepsIntensityRange(*level, *prepared->mask));
+  }
   return prepared;
 }
 
@@ -434,6 +580,7 @@ std::shared_ptr<const PreparedRigidMoving> preparedMovingFor(const ScalarImage& 
 /// small, with too little foreground or a flat one.
 struct FixedPyramid {
   std::vector<ScalarImage::Pointer> levels;
+  std::vector<double> maxima; ///< of each level
   double threshold = 0;
 };
 
@@ -441,7 +588,10 @@ FixedPyramid fixedPyramidOf(const ScalarImage& intraop, const RigidRegistrationP
 {
   requireRegistrableImage(intraop, "intraoperative", parameters.levelSpacingMm.front(), parameters.minimumVoxelsPerAxis);
   FixedPyramid pyramid;
-  for (double spacing : parameters.levelSpacingMm) pyramid.levels.push_back(shrinkTo(intraop, spacing));
+  for (double spacing : parameters.levelSpacingMm) {
+    pyramid.levels.push_back(shrinkTo(intraop, spacing));
+    pyramid.maxima.push_back(maximumOf(*pyramid.levels.back()));
+  }
   pyramid.threshold = foregroundThreshold(*pyramid.levels.front());
   requireForegroundExtent(*pyramid.levels.front(), pyramid.threshold, "intraoperative", parameters.levelSpacingMm.front(),
                           parameters.minimumVoxelsPerAxis);
@@ -563,6 +713,52 @@ unsigned optimizeFromBestStarts(LevelMetric& metric, Transform& transform, const
   return bestIterations;
 }
 
+/// What the images share at poses known to be wrong, so that the trust does not rest on what one
+/// contrast gives: the normalized mutual information of the same samples with the result displaced
+/// by the baseline translation along, and rotation about, each axis through the transform's centre,
+/// both ways (12 poses; those where fewer than minimumValidSamples land are left out). Their
+/// highest and mean, and the result's gain over the highest: (NMI - 1) / (displaced - 1).
+void measureDisplacedBaseline(const JudgedSamples& samples, const Transform& result, const RigidRegistrationParameters& parameters,
+                              RigidRegistrationResult& out)
+{
+  // Poses 0 to 11: axis (pose / 4), way (pose / 2 % 2), translation or rotation (pose % 2); each
+  // measured on its own (in parallel), gathered in order.
+  std::array<double, 12> nmis{}, overlaps{};
+  auto measure = [&](itk::SizeValueType pose) {
+    const int axis = int(pose / 4);
+    const double sign = (pose / 2) % 2 ? 1.0 : -1.0;
+    auto displacement = itk::Euler3DTransform<double>::New();
+    displacement->SetCenter(result.GetCenter());
+    if (pose % 2) {
+      double angles[3] = {0, 0, 0};
+      angles[axis] = sign * parameters.baselineDisplacementDegrees / Degrees;
+      displacement->SetRotation(angles[0], angles[1], angles[2]);
+    } else {
+      itk::Euler3DTransform<double>::OutputVectorType shift{};
+      shift[axis] = sign * parameters.baselineDisplacementMm;
+      displacement->SetTranslation(shift);
+    }
+    nmis[pose] = normalizedMutualInformation(
+      samples, [&](const PhysicalPoint& p) { return result.TransformPoint(displacement->TransformPoint(p)); }, overlaps[pose]);
+  };
+  itk::MultiThreaderBase::New()->ParallelizeArray(0, itk::SizeValueType(nmis.size()), measure, nullptr);
+  double highest = 1.0, sum = 0;
+  unsigned compared = 0;
+  for (std::size_t pose = 0; pose < nmis.size(); ++pose) {
+    if (overlaps[pose] * double(samples.points.size()) < parameters.minimumValidSamples) continue;
+    highest = std::max(highest, nmis[pose]);
+    sum += nmis[pose];
+    ++compared;
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  out.displacedPosesCompared = compared;
+  out.displacedNormalizedMutualInformation = compared ? highest : nan;
+  out.displacedNormalizedMutualInformationMean = compared ? sum / compared : nan;
+  // Both figures measure information above none (1); a baseline of exactly 1 shares nothing.
+  out.normalizedMutualInformationGain =
+    compared ? (out.normalizedMutualInformation - 1.0) / std::max(1e-6, highest - 1.0) : nan;
+}
+
 /// Each level of the pyramid, coarsest first, optimizes `transform` further; the finest level's
 /// metric, valid samples, normalized mutual information and overlap go into `result`.
 void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& moving, Transform* transform,
@@ -573,7 +769,8 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     throwIfCancelled(parameters.cancel, "rigid registration");
     PointSet::Pointer points = sampleForeground(*fixed.levels[level], fixed.threshold, parameters.samplesPerLevel[level],
                                                 parameters.seed + level);
-    LevelMetric metric = makeMetric(fixed.levels[level], moving.levels[level], points, moving.mask, transform, parameters.histogramBins);
+    LevelMetric metric = makeMetric(fixed.levels[level], moving.levels[level], points, moving.mask, moving.maskKeepsRange[level],
+                                    transform, parameters.histogramBins);
     if (level == 0 && !parameters.initialIntraopToPreop) {
       result.iterationsPerLevel.push_back(optimizeFromBestStarts(metric, *transform, parameters, result));
     } else {
@@ -584,8 +781,11 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
       result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
-      result.normalizedMutualInformation = normalizedMutualInformation(*fixed.levels[level], *moving.levels[level], *points,
-                                                                       *transform, moving.mask, parameters.histogramBins, result.overlap);
+      const JudgedSamples samples = judgedSamples(*fixed.levels[level], fixed.maxima[level], *moving.levels[level],
+                                                  moving.maxima[level], *points, moving.mask, parameters.histogramBins);
+      result.normalizedMutualInformation =
+        normalizedMutualInformation(samples, [&](const PhysicalPoint& p) { return transform->TransformPoint(p); }, result.overlap);
+      measureDisplacedBaseline(samples, *transform, parameters, result);
     }
   }
 }
@@ -599,16 +799,24 @@ std::string untrustworthyBecause(const RigidRegistrationResult& result, const Ri
         << "mutual information needs at least " << parameters.minimumValidSamples << " to be meaningful";
   } else if (result.overlap < parameters.minimumOverlap) {
     why << "only " << int(100 * result.overlap) << " % of the intraoperative foreground lands on the preoperative head";
-  } else if (result.normalizedMutualInformation < parameters.minimumNormalizedMutualInformation) {
-    why << "normalized mutual information " << result.normalizedMutualInformation << " is below "
-        << parameters.minimumNormalizedMutualInformation << ", far from what an alignment of these images gives";
+  } else if (result.displacedPosesCompared == 0) {
+    why << "no pose displaced by " << parameters.baselineDisplacementMm << " mm or " << parameters.baselineDisplacementDegrees
+        << " degrees from the result keeps " << parameters.minimumValidSamples
+        << " samples on the preoperative image, so its normalized mutual information " << result.normalizedMutualInformation
+        << " cannot be told from a wrong pose's";
+  } else if (!(result.normalizedMutualInformationGain >= parameters.minimumNormalizedMutualInformationGain)) {
+    why << "normalized mutual information " << result.normalizedMutualInformation << " is only "
+        << result.normalizedMutualInformationGain << " times as far above 1 as the "
+        << result.displacedNormalizedMutualInformation << " of the best pose displaced by " << parameters.baselineDisplacementMm
+        << " mm or " << parameters.baselineDisplacementDegrees << " degrees; an alignment of these images gives at least "
+        << parameters.minimumNormalizedMutualInformationGain << " times";
   } else if (result.rotationDegrees > parameters.maximumRotationDegrees) {
     why << "a rotation of " << result.rotationDegrees << " degrees is implausible for a head in the scanner";
   }
   return why.str();
 }
 
-/// Warnings on a trusted result whose overlap, mutual information or rotation is near the limits.
+/// Warnings on a trusted result whose overlap, mutual information gain or rotation is near the limits.
 void warnAboutDoubtfulAlignment(RigidRegistrationResult& result, const RigidRegistrationParameters& parameters)
 {
   if (result.overlap < parameters.warningOverlap) {
@@ -616,9 +824,11 @@ void warnAboutDoubtfulAlignment(RigidRegistrationResult& result, const RigidRegi
     w << "rigid: only " << int(100 * result.overlap) << " % of the intraoperative foreground overlaps the preoperative head";
     result.warnings.push_back(w.str());
   }
-  if (result.normalizedMutualInformation < parameters.warningNormalizedMutualInformation) {
+  if (result.normalizedMutualInformationGain < parameters.warningNormalizedMutualInformationGain) {
     std::ostringstream m;
-    m << "rigid: normalized mutual information is low (" << result.normalizedMutualInformation << "); check the alignment";
+    m << "rigid: normalized mutual information " << result.normalizedMutualInformation << " is only "
+      << result.normalizedMutualInformationGain << " times as far above 1 as at the best displaced pose ("
+      << result.displacedNormalizedMutualInformation << "); check the alignment";
     result.warnings.push_back(m.str());
   }
   if (result.rotationDegrees > parameters.warningRotationDegrees) {
