@@ -220,7 +220,10 @@ RegionSimilarity similarityOn(const NonrigidUpdateTrustInputs& in, const std::ve
   return s;
 }
 
-/// Where the two mappings differ by `movedMm` or more (empty when the fields are not given).
+/// Where the two mappings differ by `movedMm` or more and the scan's classification or the update
+/// shows brain (empty when the fields are not given). Not where neither does: the gap a sunken
+/// brain left and the skull above it have no preoperative counterpart the update could move, and
+/// the update's field reaches into them only to carry the brain's boundary across.
 std::vector<bool> movedVoxels(const NonrigidUpdateTrustInputs& in, double movedMm, std::size_t n)
 {
   std::vector<bool> moved;
@@ -228,7 +231,12 @@ std::vector<bool> movedVoxels(const NonrigidUpdateTrustInputs& in, double movedM
   moved.assign(n, false);
   const DisplacementVector* u = in.updateField->GetBufferPointer();
   const DisplacementVector* r = in.rigidField->GetBufferPointer();
-  for (std::size_t i = 0; i < n; ++i) moved[i] = (u[i] - r[i]).GetNorm() >= movedMm;
+  const LabelPixel* scan = in.intraopLabels ? in.intraopLabels->GetBufferPointer() : nullptr;
+  const LabelPixel* shown = in.labelsWarpedByUpdate ? in.labelsWarpedByUpdate->GetBufferPointer() : nullptr;
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool brain = (!scan && !shown) || (scan && isBrainLabel(scan[i])) || (shown && isBrainLabel(shown[i]));
+    moved[i] = brain && (u[i] - r[i]).GetNorm() >= movedMm;
+  }
   return moved;
 }
 

@@ -42,8 +42,10 @@ struct NonrigidUpdateTrustInputs {
   const LabelImage* intraopLabels = nullptr;
   const LabelImage* labelsWarpedByUpdate = nullptr;
   const LabelImage* labelsWarpedByRigid = nullptr;
-  /// Both mappings as fields (x = y + d(y)): where they differ by `movedMm` or more is where the
-  /// update changed what is shown (the "moved" region, the sharpest test).
+  /// Both mappings as fields (x = y + d(y)): where they differ by `movedMm` or more, and the
+  /// classification or the labels warped by the update show brain, is where the update moved the
+  /// brain (the "moved" region, the sharpest test; not the gap nor the skull above a sunken brain,
+  /// where the field only carries the brain's boundary across).
   const DisplacementFieldImage* updateField = nullptr;
   const DisplacementFieldImage* rigidField = nullptr;
   // What the earlier stages reported (report.json), when known.
