@@ -449,18 +449,20 @@ DisplacementFieldImage::Pointer rigidWithCorrectionField(const VoxelCorrection& 
   const std::vector<float>& correctionW = correction.w;
   std::vector<double> largest(parallelThreads(), 0.0);
   parallelRanges(std::size_t(lattice.nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned thread) {
+    double threadLargest = 0; // kept local: the threads' slots share a cache line
     for (long k = long(kBegin); k < long(kEnd); ++k) {
       for (long j = 0; j < lattice.ny; ++j) {
         for (long i = 0; i < lattice.nx; ++i) {
           const std::size_t at = lattice.offset(i, j, k);
           const Vec y = maps.indexToPhysical * Vec(double(i), double(j), double(k)) + maps.origin;
           const Vec w(correctionW[3 * at], correctionW[3 * at + 1], correctionW[3 * at + 2]);
-          largest[thread] = std::max(largest[thread], w.norm());
+          threadLargest = std::max(threadLargest, w.norm());
           const Vec x = maps.rigidMatrix * y + maps.rigidTranslation + w;
           for (int d = 0; d < 3; ++d) field[at][unsigned(d)] = float(x[d] - y[d]);
         }
       }
     }
+    largest[thread] = threadLargest;
   });
   maximumNonRigidMm = std::max(maximumNonRigidMm, *std::max_element(largest.begin(), largest.end()));
   return result;
@@ -478,6 +480,8 @@ void measureFolding(const GridMaps& maps, const ImageGeometry& grid, Deformation
   std::vector<double> minimum(parallelThreads(), std::numeric_limits<double>::infinity());
   std::vector<std::size_t> folded(parallelThreads(), 0);
   parallelRanges(std::size_t(nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned thread) {
+    double threadMinimum = std::numeric_limits<double>::infinity(); // kept local: the threads' slots share a cache line
+    std::size_t threadFolded = 0;
     for (long k = long(kBegin); k < long(kEnd); ++k) {
       for (long j = 0; j < ny; ++j) {
         for (long i = 0; i < nx; ++i) {
@@ -496,11 +500,13 @@ void measureFolding(const GridMaps& maps, const ImageGeometry& grid, Deformation
           const double det = (Mat::Identity() + dIndex * physicalToIndex).determinant();
           const std::size_t at = std::size_t(i + nx * (j + ny * k));
           jacobian[at] = float(det);
-          minimum[thread] = std::min(minimum[thread], det);
-          folded[thread] += det <= 0;
+          threadMinimum = std::min(threadMinimum, det);
+          threadFolded += det <= 0;
         }
       }
     }
+    minimum[thread] = threadMinimum;
+    folded[thread] = threadFolded;
   });
   result.minimumJacobian = *std::min_element(minimum.begin(), minimum.end());
   result.foldedVoxels = std::accumulate(folded.begin(), folded.end(), std::size_t(0));

@@ -3,7 +3,8 @@
 // transform alone and is trusted; the one that moves it the wrong way scores below and is rejected;
 // both also when the intraoperative scan has another, non-monotonic contrast (fluid bright, white
 // matter dark, as in a T2) and noise. The stages' figures (freed nodes, folding) reject on their own.
-// A small loss where the update moves the brain against a clear gain inside it is doubtful.
+// A small loss where the update moves the brain against a clear gain inside it is doubtful. The
+// moved region is the brain's, though the field moves the fluid and bone around it too.
 #include "BrainShiftTestingSupport.h"
 #include "NonrigidUpdateTrust.h"
 #include "SyntheticData.h"
@@ -138,6 +139,13 @@ int NonrigidUpdateTrustTest(int, char*[])
       BS_CHECK_MSG(wrong.trust == UpdateTrust::Rejected, contrast << ": " << trustName(wrong.trust));
       BS_CHECK(!wrong.reasons.empty() && wrong.reasons.front().find("worse than the rigid result") != std::string::npos);
       BS_CHECK(right.moved.voxels > 1000 && right.band.voxels > right.moved.voxels / 4 && right.interior.voxels > 1000);
+      // The field moves every voxel by 4 mm, but the moved region is the brain's: the voxels the
+      // scan or the update shows as brain (here the same), not the fluid and bone around it.
+      const LabelImage::Pointer sunk = labelsOf(g, -SinkMm);
+      std::size_t brainVoxels = 0;
+      for (std::size_t i = 0; i < g.numberOfVoxels(); ++i) brainVoxels += sunk->GetBufferPointer()[i] == 2;
+      BS_CHECK_MSG(right.moved.voxels <= brainVoxels && right.moved.voxels > brainVoxels / 2,
+                   right.moved.voxels << " moved voxels, " << brainVoxels << " of brain");
     }
 
     // The surface stage's and the field's figures reject a update the image would accept.
