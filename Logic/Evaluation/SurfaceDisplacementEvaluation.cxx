@@ -21,6 +21,20 @@
 #include <vector>
 
 namespace brainshift {
+namespace {
+/// The signed distance to the boundary of `brainLabels` in `labels` (zero level on the voxel faces).
+ScalarImage::Pointer brainBoundaryDistanceMm(const LabelImage& labels, const std::set<LabelPixel>& brainLabels)
+{
+  auto mask = MaskImage::New();
+  mask->SetRegions(labels.GetLargestPossibleRegion());
+  mask->CopyInformation(&labels);
+  mask->Allocate();
+  const LabelPixel* l = labels.GetBufferPointer();
+  unsigned char* m = mask->GetBufferPointer();
+  for (std::size_t i = 0, n = labels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) m[i] = brainLabels.count(l[i]) ? 1 : 0;
+  return boundaryDistanceMm(mask);
+}
+} // namespace
 
 namespace {
 using Vec = Eigen::Vector3d;
@@ -69,14 +83,7 @@ SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, co
   const Eigen::Matrix3d Ainverse = A.inverse();
 
   // The preoperative brain's boundary distance (zero level on the voxel faces).
-  auto mask = MaskImage::New();
-  mask->SetRegions(preopLabels.GetLargestPossibleRegion());
-  mask->CopyInformation(&preopLabels);
-  mask->Allocate();
-  const LabelPixel* l = preopLabels.GetBufferPointer();
-  unsigned char* m = mask->GetBufferPointer();
-  for (std::size_t i = 0, n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) m[i] = brainLabels.count(l[i]) ? 1 : 0;
-  const ScalarImage::Pointer distance = boundaryDistanceMm(mask);
+  const ScalarImage::Pointer distance = brainBoundaryDistanceMm(preopLabels, brainLabels);
   auto interpolator = itk::LinearInterpolateImageFunction<ScalarImage, double>::New();
   interpolator->SetInputImage(distance);
 
@@ -285,14 +292,7 @@ CraniotomyBoundaryEvaluation::CraniotomyBoundaryEvaluation(const LabelImage& pre
                                                            const CraniotomyFootprint& footprint, const std::set<LabelPixel>& brainLabels)
   : d(std::make_unique<Data>())
 {
-  auto mask = MaskImage::New();
-  mask->SetRegions(preopLabels.GetLargestPossibleRegion());
-  mask->CopyInformation(&preopLabels);
-  mask->Allocate();
-  const LabelPixel* l = preopLabels.GetBufferPointer();
-  unsigned char* m = mask->GetBufferPointer();
-  for (std::size_t i = 0, n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) m[i] = brainLabels.count(l[i]) ? 1 : 0;
-  d->distance = boundaryDistanceMm(mask);
+  d->distance = brainBoundaryDistanceMm(preopLabels, brainLabels);
   d->interpolator = itk::LinearInterpolateImageFunction<ScalarImage, double>::New();
   d->interpolator->SetInputImage(d->distance);
   d->trueRigid = affineMapOf(trueRigidIntraopToPreop);
