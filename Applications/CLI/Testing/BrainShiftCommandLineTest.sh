@@ -653,6 +653,11 @@ HardScenario)
   float_check "$e" "['transforms']['brainshift']['groups']['craniotomy']['mean_mm']" "< 0.3 * $rigid_craniotomy"
   float_check "$e" "['transforms']['brainshift']['groups']['near-cavity']['mean_mm']" "< 0.3 * $rigid_cavity"
   [ "$(json_value "$hard/report.json" "['trust']['nonrigid']")" = "trusted" ] || fail "the hard scenario's update was not trusted"
+  # The brain boundary under the craniotomy, as the whole transform shows it: measured 2.00 mm mean
+  # against 7.50 for the rigid registration (the surface's nodes stop 1.97 mm short on this coarse
+  # case; the field as it was before it carried the correction across the boundary: 2.98 mm).
+  rigid_boundary=$(json_value "$e" "['boundary_under_craniotomy']['shown']['brainshift_rigid']['mean_abs_mm']")
+  float_check "$e" "['boundary_under_craniotomy']['shown']['brainshift']['mean_abs_mm']" "< 0.35 * $rigid_boundary"
   float_check "$hard/report.json" "['stages']['surface']['directional_nodes']" "> 100"
   # The refine stage (by default only in T2-like scans: elsewhere it made the scenarios worse,
   # README) runs when asked and reports each pass.
