@@ -107,6 +107,11 @@ void checkFieldInputs(vtkDataArray* displacement, const SpatialTransform& rigid,
   if (!(parameters.fallbackSigmaMm > 0) || parameters.fallbackSigmaMm > 100) {
     throw InputError("warp: the fallback width must be within 0 to 100 mm");
   }
+  if (!(parameters.continuationMaximumMm >= 0) || !(parameters.continuationMinimumMm >= 0) ||
+      !(parameters.continuationMaximumCompression > 0 && parameters.continuationMaximumCompression <= 1) ||
+      (parameters.continuationMaximumMm > 0 && parameters.continuationMinimumMm > parameters.continuationMaximumMm)) {
+    throw InputError("warp: the continuation's band needs 0 <= minimum <= maximum and a compression in (0, 1]");
+  }
 }
 
 MeshNodes meshNodesOf(vtkUnstructuredGrid* mesh, vtkDataArray* displacement, const GridMaps& maps, const std::string& meshName)

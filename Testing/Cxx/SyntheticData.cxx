@@ -3,6 +3,9 @@
 #include <itkImageRegionIteratorWithIndex.h>
 #include <itkVersor.h>
 
+#include <cmath>
+#include <random>
+
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
 #include <vtkDoubleArray.h>
@@ -146,6 +149,35 @@ vtkSmartPointer<vtkUnstructuredGrid> makeTwoTetrahedra()
   label->InsertNextValue(4);
   mesh->GetCellData()->AddArray(label);
   return mesh;
+}
+
+itk::Image<unsigned char, 3>::Pointer makeRandomBallsMask(const std::array<double, 3>& spacing, double extentMm, int balls,
+                                                          std::pair<double, double> centreMm, std::pair<double, double> radiusMm,
+                                                          unsigned seed)
+{
+  using Mask = itk::Image<unsigned char, 3>;
+  auto mask = Mask::New();
+  Mask::SizeType size;
+  Mask::SpacingType s;
+  for (unsigned a = 0; a < 3; ++a) {
+    size[a] = itk::SizeValueType(std::lround(extentMm / spacing[a]));
+    s[a] = spacing[a];
+  }
+  mask->SetRegions(Mask::RegionType(size));
+  mask->SetSpacing(s);
+  mask->Allocate();
+  mask->FillBuffer(0);
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<double> centre(centreMm.first, centreMm.second), radius(radiusMm.first, radiusMm.second);
+  for (int ball = 0; ball < balls; ++ball) {
+    const double c[3] = {centre(random), centre(random), centre(random)}, r = radius(random);
+    for (itk::ImageRegionIteratorWithIndex<Mask> it(mask, mask->GetLargestPossibleRegion()); !it.IsAtEnd(); ++it) {
+      double d2 = 0;
+      for (unsigned a = 0; a < 3; ++a) d2 += std::pow(double(it.GetIndex()[a]) * spacing[a] - c[a], 2);
+      if (d2 < r * r) it.Set(1);
+    }
+  }
+  return mask;
 }
 
 } // namespace brainshift::testing

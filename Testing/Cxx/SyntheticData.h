@@ -11,6 +11,7 @@
 #include <vtkUnstructuredGrid.h>
 
 #include <array>
+#include <utility>
 
 namespace brainshift::testing {
 
@@ -62,5 +63,13 @@ vtkSmartPointer<vtkPolyData> makeTetrahedronSurface();
 
 /// Two tetrahedra sharing a face (five points), with an int cell array "Label" (2, 4).
 vtkSmartPointer<vtkUnstructuredGrid> makeTwoTetrahedra();
+
+/// A binary mask (1 inside) of `balls` random overlapping balls (seeded): concave and convex
+/// boundaries, thin bridges. The grid spans `extentMm` along each axis from the origin at `spacing`;
+/// centres are drawn in [centreMm.first, centreMm.second] per axis, radii in [radiusMm.first,
+/// radiusMm.second].
+itk::Image<unsigned char, 3>::Pointer makeRandomBallsMask(const std::array<double, 3>& spacing, double extentMm, int balls,
+                                                          std::pair<double, double> centreMm, std::pair<double, double> radiusMm,
+                                                          unsigned seed);
 
 } // namespace brainshift::testing

@@ -7,38 +7,19 @@
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
 #include "DistanceMaps.h"
+#include "SyntheticData.h"
 
 #include <itkImageRegionIteratorWithIndex.h>
 
 #include <cmath>
 #include <iostream>
-#include <random>
 
 namespace {
 using namespace brainshift;
 
 MaskImage::Pointer randomBalls(const std::array<double, 3>& spacing, std::uint32_t seed)
 {
-  auto mask = MaskImage::New();
-  MaskImage::SizeType size;
-  for (int a = 0; a < 3; ++a) size[a] = itk::SizeValueType(std::lround(60.0 / spacing[std::size_t(a)]));
-  mask->SetRegions(MaskImage::RegionType(size));
-  MaskImage::SpacingType s;
-  for (int a = 0; a < 3; ++a) s[a] = spacing[std::size_t(a)];
-  mask->SetSpacing(s);
-  mask->Allocate();
-  mask->FillBuffer(0);
-  std::mt19937 random(seed);
-  std::uniform_real_distribution<double> centre(18.0, 42.0), radius(4.0, 14.0);
-  for (int ball = 0; ball < 9; ++ball) {
-    const double c[3] = {centre(random), centre(random), centre(random)}, r = radius(random);
-    for (itk::ImageRegionIteratorWithIndex<MaskImage> it(mask, mask->GetLargestPossibleRegion()); !it.IsAtEnd(); ++it) {
-      double d2 = 0;
-      for (int a = 0; a < 3; ++a) d2 += std::pow(double(it.GetIndex()[a]) * spacing[std::size_t(a)] - c[a], 2);
-      if (d2 < r * r) it.Set(1);
-    }
-  }
-  return mask;
+  return brainshift::testing::makeRandomBallsMask(spacing, 60.0, 9, {18.0, 42.0}, {4.0, 14.0}, seed);
 }
 
 /// Voxels where the two tests disagree; `deep` counts those both call deep enough.

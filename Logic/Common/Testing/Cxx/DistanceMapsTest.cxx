@@ -4,40 +4,19 @@
 // isotropic and an anisotropic grid, at radii on and between voxel distances.
 #include "BrainShiftTestingSupport.h"
 #include "DistanceMaps.h"
+#include "SyntheticData.h"
 
 #include <itkImageRegionIteratorWithIndex.h>
 
 #include <cmath>
 #include <iostream>
-#include <random>
 
 namespace {
 using namespace brainshift;
 
 MaskImage::Pointer randomBalls(const std::array<double, 3>& spacing, std::uint32_t seed)
 {
-  auto mask = MaskImage::New();
-  MaskImage::SizeType size;
-  MaskImage::SpacingType s;
-  for (unsigned a = 0; a < 3; ++a) {
-    size[a] = itk::SizeValueType(std::lround(60.0 / spacing[a]));
-    s[a] = spacing[a];
-  }
-  mask->SetRegions(MaskImage::RegionType(size));
-  mask->SetSpacing(s);
-  mask->Allocate();
-  mask->FillBuffer(0);
-  std::mt19937 random(seed);
-  std::uniform_real_distribution<double> centre(20.0, 40.0), radius(2.0, 12.0);
-  for (int ball = 0; ball < 12; ++ball) {
-    const double c[3] = {centre(random), centre(random), centre(random)}, r = radius(random);
-    for (itk::ImageRegionIteratorWithIndex<MaskImage> it(mask, mask->GetLargestPossibleRegion()); !it.IsAtEnd(); ++it) {
-      double d2 = 0;
-      for (unsigned a = 0; a < 3; ++a) d2 += std::pow(double(it.GetIndex()[a]) * spacing[a] - c[a], 2);
-      if (d2 < r * r) it.Set(1);
-    }
-  }
-  return mask;
+  return brainshift::testing::makeRandomBallsMask(spacing, 60.0, 12, {20.0, 40.0}, {2.0, 12.0}, seed);
 }
 
 /// Voxels where `found` and the distance map's test disagree; `agreed` counts those both select.

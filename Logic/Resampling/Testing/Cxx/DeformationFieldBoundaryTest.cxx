@@ -4,6 +4,7 @@
 // so the boundary the warped labels show is the deformed face (within half a millimetre). The fade
 // alone (continuationMaximumMm 0) averages the smaller corrections deeper inside and shows the
 // boundary more than a millimetre too high: the failure the continuation fixes. Neither folds.
+#include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "DeformationField.h"
 #include "SyntheticData.h"
@@ -132,5 +133,11 @@ int DeformationFieldBoundaryTest(int, char*[])
     BS_CHECK_MSG(continued.foldedVoxels == 0 && continued.minimumJacobian > 0.1, continued.foldedVoxels << " folded, min "
                                                                                   << continued.minimumJacobian);
     BS_CHECK(faded.foldedVoxels == 0);
+    DeformationFieldParameters absurd;
+    absurd.continuationMaximumCompression = 0;
+    BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "continuation");
+    absurd = {};
+    absurd.continuationMinimumMm = 20;
+    BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "minimum <= maximum");
   });
 }
