@@ -51,6 +51,7 @@ struct NonrigidUpdateTrustInputs {
   // What the earlier stages reported (report.json), when known.
   std::optional<double> surfaceMeanResidualMm;
   std::optional<std::size_t> surfaceNodes, unmatchedSurfaceNodes; ///< nodes freed because no boundary matched
+  /// The voxels inside the deformed mesh (the brain), and those of them where the field folds.
   std::optional<std::size_t> foldedVoxels, meshVoxels;
 };
 

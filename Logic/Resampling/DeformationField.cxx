@@ -474,8 +474,9 @@ DisplacementFieldImage::Pointer rigidWithCorrectionField(const VoxelCorrection& 
 }
 
 /// Folding: det of the Jacobian of y -> x (central differences in index space, one-sided at the
-/// border, then physical) into result.jacobianDeterminant, with its minimum and the folded voxels.
-void measureFolding(const GridMaps& maps, const ImageGeometry& grid, DeformationField& result)
+/// border, then physical) into result.jacobianDeterminant, with its minimum and the folded voxels,
+/// all and those inside the deformed mesh (`located` 1).
+void measureFolding(const GridMaps& maps, const ImageGeometry& grid, const std::vector<unsigned char>& located, DeformationField& result)
 {
   const long nx = long(grid.size[0]), ny = long(grid.size[1]), nz = long(grid.size[2]);
   const DisplacementVector* field = result.field->GetBufferPointer();
@@ -483,10 +484,10 @@ void measureFolding(const GridMaps& maps, const ImageGeometry& grid, Deformation
   float* jacobian = result.jacobianDeterminant->GetBufferPointer();
   const Mat physicalToIndex = maps.indexToPhysical.inverse();
   std::vector<double> minimum(parallelThreads(), std::numeric_limits<double>::infinity());
-  std::vector<std::size_t> folded(parallelThreads(), 0);
+  std::vector<std::size_t> folded(parallelThreads(), 0), foldedInMesh(parallelThreads(), 0);
   parallelRanges(std::size_t(nz), [&](std::size_t kBegin, std::size_t kEnd, unsigned thread) {
     double threadMinimum = std::numeric_limits<double>::infinity(); // kept local: the threads' slots share a cache line
-    std::size_t threadFolded = 0;
+    std::size_t threadFolded = 0, threadFoldedInMesh = 0;
     for (long k = long(kBegin); k < long(kEnd); ++k) {
       for (long j = 0; j < ny; ++j) {
         for (long i = 0; i < nx; ++i) {
@@ -507,14 +508,17 @@ void measureFolding(const GridMaps& maps, const ImageGeometry& grid, Deformation
           jacobian[at] = float(det);
           threadMinimum = std::min(threadMinimum, det);
           threadFolded += det <= 0;
+          threadFoldedInMesh += det <= 0 && located[at] == 1;
         }
       }
     }
     minimum[thread] = threadMinimum;
     folded[thread] = threadFolded;
+    foldedInMesh[thread] = threadFoldedInMesh;
   });
   result.minimumJacobian = *std::min_element(minimum.begin(), minimum.end());
   result.foldedVoxels = std::accumulate(folded.begin(), folded.end(), std::size_t(0));
+  result.foldedVoxelsInMesh = std::accumulate(foldedInMesh.begin(), foldedInMesh.end(), std::size_t(0));
 }
 } // namespace
 
@@ -545,7 +549,7 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   result.field = rigidWithCorrectionField(correction, maps, grid, result.maximumNonRigidMm);
 
   const auto jacobianStart = std::chrono::steady_clock::now();
-  measureFolding(maps, grid, result);
+  measureFolding(maps, grid, correction.located, result);
   result.jacobianSeconds = secondsSince(jacobianStart);
   return result;
 }

@@ -41,6 +41,10 @@ struct DeformationField {
   DisplacementFieldImage::Pointer field; ///< x = y + d(y), LPS mm, rigid part included
   ScalarImage::Pointer jacobianDeterminant;
   std::size_t voxels = 0, meshVoxels = 0, foldedVoxels = 0;
+  /// Folded voxels inside the deformed mesh (the brain); the rest fold in the continuation outside
+  /// it, where a sink deeper than the band can take (about 2/3 of continuationMaximumMm) compresses
+  /// the gap and air above the brain past zero.
+  std::size_t foldedVoxelsInMesh = 0;
   std::size_t invertedDeformedTetrahedra = 0; ///< tetrahedra the displacement turned inside out
   double minimumJacobian = 0, maximumNonRigidMm = 0;
   double fallbackSigmaMm = 0; ///< the fade's width used

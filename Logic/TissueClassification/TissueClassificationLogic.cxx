@@ -9,6 +9,7 @@
 #include <itkBSplineControlPointImageFilter.h>
 #include <itkBinShrinkImageFilter.h>
 #include <itkConnectedComponentImageFilter.h>
+#include <itkLinearInterpolateImageFunction.h>
 #include <itkN4BiasFieldCorrectionImageFilter.h>
 #include <itkRelabelComponentImageFilter.h>
 #include <itkShrinkImageFilter.h>
@@ -20,6 +21,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <queue>
 #include <random>
 #include <set>
 #include <sstream>
@@ -500,20 +502,49 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
   return parameters;
 }
 
-double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels)
+namespace {
+/// The preoperative image's values over each brain tissue (empty where the grids differ).
+std::map<LabelPixel, std::vector<float>> preoperativeBrainIntensities(const ScalarImage& preopImage, const LabelImage& preopLabels)
 {
   std::map<LabelPixel, std::vector<float>> values;
   const float* v = preopImage.GetBufferPointer();
   const LabelPixel* l = preopLabels.GetBufferPointer();
   const std::size_t n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels();
-  if (preopImage.GetLargestPossibleRegion().GetNumberOfPixels() != n) return std::nan("");
+  if (preopImage.GetLargestPossibleRegion().GetNumberOfPixels() != n) return values;
   for (std::size_t i = 0; i < n; ++i) {
     if (l[i] >= Parenchyma && l[i] <= Tumour) values[l[i]].push_back(v[i]);
   }
+  return values;
+}
+
+/// The tumour's place between the fluid (0) and the parenchyma (1), from the tissues' values.
+double tumourContrastOf(std::map<LabelPixel, std::vector<float>>& values)
+{
   if (values[Tumour].empty() || values[Ventricles].empty() || values[Parenchyma].empty()) return std::nan("");
   const double fluid = median(values[Ventricles]), parenchyma = median(values[Parenchyma]);
   if (std::abs(parenchyma - fluid) < 1e-6) return std::nan("");
   return (median(values[Tumour]) - fluid) / (parenchyma - fluid);
+}
+} // namespace
+
+PreoperativeFluidAndParenchyma preoperativeFluidAndParenchyma(const ScalarImage& preopImage, const LabelImage& preopLabels)
+{
+  auto values = preoperativeBrainIntensities(preopImage, preopLabels);
+  return {median(values[Ventricles]), median(values[Parenchyma])};
+}
+
+void takePreoperativeImage(TissueClassificationParameters& parameters, const ScalarImage& preopImage,
+                           const LabelImage& preopLabels, const SpatialTransform& intraopToPreop)
+{
+  auto values = preoperativeBrainIntensities(preopImage, preopLabels); // once for both
+  parameters.preopTumourContrast = tumourContrastOf(values);
+  parameters.preopLook = PreoperativeImageLook{&preopImage, &intraopToPreop, {median(values[Ventricles]), median(values[Parenchyma])}};
+}
+
+double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels)
+{
+  auto values = preoperativeBrainIntensities(preopImage, preopLabels);
+  return tumourContrastOf(values);
 }
 
 std::string tissueName(LabelPixel label)
@@ -538,8 +569,8 @@ void TissueClassificationParameters::validate() const
   if (prototypesPerClass < k) {
     throw InputError("classification: " + std::to_string(prototypesPerClass) + " prototypes per class is fewer than k = " + std::to_string(k));
   }
-  if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0)) {
-    throw InputError("classification: erosion, opening and hole size must be non-negative");
+  if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0) || !(gapReachMm >= 0)) {
+    throw InputError("classification: erosion, opening, gap reach and hole size must be non-negative");
   }
 }
 
@@ -923,20 +954,119 @@ MaskImage::Pointer fluidInBrain(const ClassificationWork& w, const TissueClassif
 
 /// The part of `fluid` thicker than P.fluidOpeningMm: a morphological opening (the voxels that
 /// deep, then the fluid within that reach of them: the distance maps' tests, without the maps).
+/// The reach back is at least one voxel along every axis (an ellipsoid of semi-axes
+/// max(opening, spacing)): depth is measured to the centres of the fluid's boundary voxels, so on
+/// 2.5 mm slices the slice next to the core lies 2.5 mm from it, and a 2 mm reach left the fluid's
+/// boundary slices out of a body however thick it was.
 MaskImage::Pointer thickPartOf(const ClassificationWork& w, const MaskImage::Pointer& fluid)
 {
-  const MaskImage::Pointer core = voxelsAtLeastDeep(fluid, w.P.fluidOpeningMm);
-  MaskImage::Pointer thick = voxelsWithin(core, w.P.fluidOpeningMm + 1e-3);
+  const double opening = w.P.fluidOpeningMm;
+  const MaskImage::Pointer core = voxelsAtLeastDeep(fluid, opening);
+  // The ellipsoid as a ball of radius `opening` on a grid whose spacing is scaled per axis.
+  MaskImage::SpacingType scaled = core->GetSpacing();
+  for (unsigned a = 0; a < 3; ++a) scaled[a] *= opening > 0 ? opening / std::max(opening, scaled[a]) : 1.0;
+  core->SetSpacing(scaled);
+  MaskImage::Pointer thick = voxelsWithin(core, opening + 1e-3);
+  thick->CopyInformation(fluid);
   for (std::size_t i = 0; i < w.N; ++i) thick->GetBufferPointer()[i] = thick->GetBufferPointer()[i] && fluid->GetBufferPointer()[i];
   return thick;
 }
 
-/// Thick fluid (or air) in the brain: ventricles where the aligned ventricles are (30 % of a body
-/// within 2 mm of them), else a gap or cavity (background). Thin fluid far from the ventricles is a
-/// sulcus, part of the parenchyma.
-void separateThickFluid(const ClassificationWork& w, const TissueClassificationResult& result, LabelPixel* out)
+/// Whether the preoperative image (P.preopLook, through its transform, linear interpolation)
+/// showed tissue at an intraoperative voxel: a value nearer the preoperative parenchyma's median than
+/// the ventricles'. False outside the preoperative image.
+class PreoperativeTissueLook {
+public:
+  PreoperativeTissueLook(const ClassificationWork& w, const PreoperativeImageLook& look)
+    : w_(w)
+    , transform_(*look.intraopToPreop)
+    , middle_(0.5 * (look.medians.fluid + look.medians.parenchyma))
+    , tissueBrighter_(look.medians.parenchyma > look.medians.fluid)
+    , interpolator_(itk::LinearInterpolateImageFunction<ScalarImage, double>::New())
+  {
+    interpolator_->SetInputImage(look.image);
+  }
+  bool operator()(std::size_t voxel) const
+  {
+    const auto size = w_.size;
+    const itk::Index<3> index = {{itk::IndexValueType(voxel % size[0]), itk::IndexValueType((voxel / size[0]) % size[1]),
+                                  itk::IndexValueType(voxel / (size[0] * size[1]))}};
+    PhysicalPoint x;
+    w_.intraop.TransformIndexToPhysicalPoint(index, x);
+    const PhysicalPoint before = transform_.TransformPoint(x);
+    if (!interpolator_->IsInsideBuffer(before)) return false;
+    const double value = interpolator_->Evaluate(before);
+    return tissueBrighter_ ? value > middle_ : value < middle_;
+  }
+
+private:
+  const ClassificationWork& w_;
+  const SpatialTransform& transform_;
+  const double middle_;
+  const bool tissueBrighter_;
+  itk::LinearInterpolateImageFunction<ScalarImage, double>::Pointer interpolator_;
+};
+
+/// The gaps and cavities take the fluid they reach through fluid: from their voxels (`gaps`), over
+/// face neighbours, the brain-labelled `fluid` within P.gapReachMm of path (at least one voxel step
+/// along every axis, so a 2.5 mm slice can be crossed), where the preoperative image showed tissue.
+/// That is the sheet of fluid pooled over a brain that sank (brain before it sank); sulci and
+/// cisterns next to a gap were fluid before surgery too and stay brain. Returns the voxels taken.
+std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid, const std::vector<std::size_t>& gaps, LabelPixel* out)
 {
-  auto labelled = components<unsigned>(thickPartOf(w, fluidInBrain(w, result, out)), false);
+  const PreoperativeImageLook& look = *w.P.preopLook;
+  if (gaps.empty() || !look.image || !look.intraopToPreop || !std::isfinite(look.medians.fluid) ||
+      !std::isfinite(look.medians.parenchyma) || look.medians.fluid == look.medians.parenchyma) {
+    return 0;
+  }
+  const PreoperativeTissueLook showedTissue(w, look);
+  const auto spacing = w.intraop.GetSpacing();
+  const float reach = float(std::max({w.P.gapReachMm, spacing[0], spacing[1], spacing[2]}) + 1e-3);
+  const auto size = w.size;
+  const std::size_t strides[3] = {1, size[0], size[0] * size[1]};
+  const unsigned char* isFluid = fluid.GetBufferPointer();
+  constexpr float unreached = std::numeric_limits<float>::infinity();
+  std::vector<float> pathMm(w.N, unreached);
+  using Entry = std::pair<float, std::size_t>;
+  std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> front;
+  for (std::size_t i : gaps) {
+    pathMm[i] = 0.0f;
+    front.push({0.0f, i});
+  }
+  std::size_t joined = 0;
+  while (!front.empty()) {
+    const auto [path, i] = front.top();
+    front.pop();
+    if (path > pathMm[i]) continue;
+    const std::size_t at[3] = {i % size[0], (i / size[0]) % size[1], i / (size[0] * size[1])};
+    for (int axis = 0; axis < 3; ++axis) {
+      const float step = path + float(spacing[axis]);
+      if (step > reach) continue;
+      for (const bool up : {false, true}) {
+        if (up ? at[axis] + 1 == size[axis] : at[axis] == 0) continue;
+        const std::size_t j = up ? i + strides[axis] : i - strides[axis];
+        if (step >= pathMm[j]) continue;
+        if (pathMm[j] == unreached) { // first reached: fluid the k-NN calls brain, tissue before surgery
+          if (!isFluid[j] || !isBrainLabel(out[j]) || !showedTissue(j)) continue;
+          out[j] = Background;
+          ++joined;
+        }
+        pathMm[j] = step;
+        front.push({step, j});
+      }
+    }
+  }
+  return joined;
+}
+
+/// Thick fluid (or air) in the brain: ventricles where the aligned ventricles are (30 % of a body
+/// within 2 mm of them), else a gap or cavity (background), which takes the fluid next to it that
+/// was tissue before surgery (joinFluidToGaps; with P.preopLook). Thin fluid far from the
+/// ventricles is a sulcus, part of the parenchyma.
+void separateThickFluid(const ClassificationWork& w, TissueClassificationResult& result, LabelPixel* out)
+{
+  const MaskImage::Pointer fluid = fluidInBrain(w, result, out);
+  auto labelled = components<unsigned>(thickPartOf(w, fluid), false);
   const unsigned* component = labelled->GetBufferPointer();
   std::map<unsigned, std::pair<std::size_t, std::size_t>> overlap; // component -> (in ventricles, all)
   const std::size_t ventricleSlot = w.slotOf(Ventricles);
@@ -946,14 +1076,21 @@ void separateThickFluid(const ClassificationWork& w, const TissueClassificationR
     o.second += 1;
     o.first += w.distance(i, ventricleSlot) <= 2.0f;
   }
+  std::vector<std::size_t> gaps;
   for (std::size_t i = 0; i < w.N; ++i) {
     if (component[i]) {
-      if (!isBrainLabel(out[i])) continue; // the head's or background's own voxels keep their label
       const auto& o = overlap[component[i]];
-      out[i] = double(o.first) >= 0.3 * double(o.second) ? Ventricles : Background;
+      const bool ventricle = double(o.first) >= 0.3 * double(o.second);
+      if (!ventricle) gaps.push_back(i);
+      if (!isBrainLabel(out[i])) continue; // the head's or background's own voxels keep their label
+      out[i] = ventricle ? Ventricles : Background;
     } else if (out[i] == Ventricles && w.distance(i, ventricleSlot) > 0.5f * float(w.P.saturationMm)) {
       out[i] = Parenchyma;
     }
+  }
+  if (w.P.preopLook) {
+    const auto s = w.intraop.GetSpacing();
+    result.fluidJoinedToGapsMl = double(joinFluidToGaps(w, *fluid, gaps, out)) * s[0] * s[1] * s[2] / 1000.0;
   }
 }
 

@@ -47,6 +47,23 @@ TumourResection tumourResectionFromString(const std::string& text); ///< InputEr
 /// NaN without a tumour or ventricles.
 double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels);
 
+/// The medians of the preoperative image over the ventricles (fluid) and the parenchyma; NaN where
+/// a tissue is missing or the grids differ.
+struct PreoperativeFluidAndParenchyma {
+  double fluid = std::numeric_limits<double>::quiet_NaN();
+  double parenchyma = std::numeric_limits<double>::quiet_NaN();
+};
+PreoperativeFluidAndParenchyma preoperativeFluidAndParenchyma(const ScalarImage& preopImage, const LabelImage& preopLabels);
+
+/// The preoperative image as the classification reads it: through the rigid transform (also when
+/// the spatial prior is the refine pass's warped labels), tissue where a value is nearer the
+/// preoperative parenchyma's median than the ventricles'.
+struct PreoperativeImageLook {
+  ScalarImage::ConstPointer image;
+  SpatialTransform::ConstPointer intraopToPreop;
+  PreoperativeFluidAndParenchyma medians;
+};
+
 /// What the resection decision saw: the medians of the intraoperative intensity (0-100 scale) at
 /// the tumour's, the ventricles' and the parenchyma's prototypes, the tumour's place between fluid
 /// (0) and parenchyma (1) now and before surgery, the shares of the tumour's prototypes nearest the
@@ -99,6 +116,13 @@ struct TissueClassificationParameters {
   /// gap's or cavity's fluid the k-NN gave to a tumour wrongly kept stays brain).
   bool tumourFluidByLook = true;
   double smallHoleMl = 0.5;            ///< holes in the brain smaller than this are filled
+  /// Where given, a gap or a cavity (thick fluid given to the background) takes the fluid it reaches
+  /// through fluid within gapReachMm (the path's length in mm, at least one voxel step each way),
+  /// where the preoperative image showed tissue: the sheet of fluid pooled over a sunken brain,
+  /// which 2.5 mm slices leave too thin for the opening, and which was brain before it sank. Fluid
+  /// that was fluid before surgery (sulci, cisterns) stays brain. Empty: no growth.
+  std::optional<PreoperativeImageLook> preopLook;
+  double gapReachMm = 3.0;
   std::uint64_t seed = 2000;
   TumourResection tumourResection = TumourResection::Auto;
   /// preoperativeTumourContrast of the case; NaN: the tumour is compared with fluid and parenchyma alone.
@@ -111,6 +135,12 @@ struct Configuration;
 /// decision); every front end takes them from here.
 TissueClassificationParameters classificationParametersFrom(const Configuration& configuration);
 
+/// What the preoperative image tells the classification, set on `parameters`: the tumour's look
+/// before surgery (preopTumourContrast) and where tissue was (preopLook, through `intraopToPreop`).
+/// Every front end that has the preoperative image calls it.
+void takePreoperativeImage(TissueClassificationParameters& parameters, const ScalarImage& preopImage,
+                           const LabelImage& preopLabels, const SpatialTransform& intraopToPreop);
+
 struct TissueClassificationResult {
   LabelImage::Pointer labels;                ///< on the intraoperative grid, the contract's labels
   std::vector<TissuePrototype> prototypes;   ///< the ones used (record them for the next scan)
@@ -121,6 +151,7 @@ struct TissueClassificationResult {
   double featureSeconds = 0, knnSeconds = 0, cleanupSeconds = 0;
   std::size_t voxels = 0;
   std::size_t knnQueries = 0;                ///< voxels that needed a tree query (the rest shared an answer)
+  double fluidJoinedToGapsMl = 0;            ///< brain-labelled fluid a gap or cavity took (preopImage)
   Warnings warnings;
 };
 

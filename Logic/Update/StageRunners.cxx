@@ -243,7 +243,7 @@ void runClassifyStage(RunContext& context)
   TissueClassificationParameters parameters = classificationParametersFrom(configuration);
   parameters.cancel = context.cancelFlag();
   if (!context.options().preopImage.empty()) {
-    parameters.preopTumourContrast = preoperativeTumourContrast(context.preopImage("classify"), context.preopLabels("classify"));
+    takePreoperativeImage(parameters, context.preopImage("classify"), context.preopLabels("classify"), *rigid);
   }
   const LabelImage* prior = context.warpedPrior();
   // refine: the first classification's tumour decision stands (unless the user gave one).
@@ -277,6 +277,7 @@ void runClassifyStage(RunContext& context)
                                          {"tumour_evidence", tumourEvidence},
                                          {"contrast", scanContrastJson(result.contrast)},
                                          {"relabelled_where_moved", relabelled},
+                                         {"fluid_joined_to_gaps_ml", result.fluidJoinedToGapsMl},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
                                                          : std::string("preoperative labels through the rigid transform")},
                                          {"feature_seconds", result.featureSeconds},
@@ -820,7 +821,7 @@ NonrigidUpdateTrustAssessment assessUpdate(RunContext& context, const ScalarImag
   in.labelsWarpedByRigid = rigid.labels.GetPointer();
   in.updateField = deformation.field.GetPointer();
   in.rigidField = rigid.field.GetPointer();
-  in.foldedVoxels = deformation.foldedVoxels;
+  in.foldedVoxels = deformation.foldedVoxelsInMesh; // the brain's folds; those of the gap above it do not misplace it
   in.meshVoxels = deformation.meshVoxels;
   if (context.report().hasStage("surface")) {
     const nlohmann::json& surface = context.report().stage("surface");
@@ -1080,6 +1081,7 @@ void reportWarpStage(RunContext& context, const DeformationField& deformation, b
                                      {"voxels", deformation.voxels},
                                      {"mesh_voxels", deformation.meshVoxels},
                                      {"folded_voxels", deformation.foldedVoxels},
+                                     {"folded_voxels_in_mesh", deformation.foldedVoxelsInMesh},
                                      {"min_jacobian_determinant", deformation.minimumJacobian},
                                      {"inverted_deformed_tetrahedra", deformation.invertedDeformedTetrahedra},
                                      {"max_non_rigid_mm", deformation.maximumNonRigidMm},
@@ -1100,7 +1102,8 @@ void reportWarpStage(RunContext& context, const DeformationField& deformation, b
   context.report().set("trust", trustEntry(trust, seconds.trust));
   if (deformation.foldedVoxels > 0) {
     context.report().addWarnings({"warp: " + std::to_string(deformation.foldedVoxels) +
-                                  " voxels where the deformation folds (Jacobian determinant <= 0)"});
+                                  " voxels where the deformation folds (Jacobian determinant <= 0), " +
+                                  std::to_string(deformation.foldedVoxelsInMesh) + " of them in the brain's mesh"});
   }
   context.say("warp: %zu voxels (%zu in the mesh), %zu folded, field %.2f s, warp %.2f s, trust %.2f s, files %.2f s more\n",
               deformation.voxels, deformation.meshVoxels, deformation.foldedVoxels, seconds.field, seconds.warp, seconds.trust,

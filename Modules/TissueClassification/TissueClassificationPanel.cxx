@@ -18,6 +18,9 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
 {
   intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
+  preopImage_ = new NodeSelector({NodeKind::ScalarVolume}, "preop", this); // the preoperative MRI, not an overlay
+  preopImage_->setToolTip(tr("Optional: the preoperative MRI on the labels' grid. With it the gap under the craniotomy "
+                             "takes the fluid pooled over the sunken brain, and the tumour is compared with its look before surgery"));
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
   k_ = new QSpinBox(this);
   k_->setRange(1, 101);
@@ -39,6 +42,7 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   auto* form = new QFormLayout;
   form->addRow(tr("Intraoperative volume"), intraop_);
   form->addRow(tr("Preoperative labels"), preopLabels_);
+  form->addRow(tr("Preoperative volume"), preopImage_);
   form->addRow(tr("Rigid intraop_to_preop"), transform_);
   form->addRow(tr("Neighbours (k)"), k_);
   auto* picking = new QHBoxLayout;
@@ -54,6 +58,7 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
 
   intraop_->setScene(&scene_);
   preopLabels_->setScene(&scene_);
+  preopImage_->setScene(&scene_);
   transform_->setScene(&scene_);
   for (const auto& volume : scene_.nodesOfType<ScalarVolumeNode>()) {
     if (volume->role() == "intraop") intraop_->setCurrentNodeId(QString::fromStdString(volume->id()));
@@ -77,12 +82,13 @@ TissueClassificationPanel::~TissueClassificationPanel()
 {
   intraop_->setScene(nullptr);
   preopLabels_->setScene(nullptr);
+  preopImage_->setScene(nullptr);
   transform_->setScene(nullptr);
 }
 
 void TissueClassificationPanel::lockInputs(bool locked)
 {
-  for (QWidget* input : std::initializer_list<QWidget*>{intraop_, preopLabels_, transform_, k_, clear_}) input->setEnabled(!locked);
+  for (QWidget* input : std::initializer_list<QWidget*>{intraop_, preopLabels_, preopImage_, transform_, k_, clear_}) input->setEnabled(!locked);
 }
 
 void TissueClassificationPanel::addPrototype(const std::array<double, 3>& lps)
@@ -132,15 +138,18 @@ void TissueClassificationPanel::run()
   ScalarImage::ConstPointer image = intraop->image();
   LabelImage::ConstPointer preopLabels = labels->image();
   SpatialTransform::ConstPointer rigid = transform->transformFromParent();
+  auto preop = std::dynamic_pointer_cast<ScalarVolumeNode>(preopImage_->currentNode());
+  ScalarImage::ConstPointer preopImage = preop ? preop->image() : nullptr;
   std::optional<std::vector<TissuePrototype>> given;
   if (!prototypes_.empty()) given = prototypes_;
   const QString message = given ? tr("Classifying with %1 listed prototypes ...").arg(given->size())
                                 : tr("Classifying with automatic prototypes ...");
-  controls_->start(message, [this, image, preopLabels, rigid, given, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
+  controls_->start(message, [this, image, preopLabels, preopImage, rigid, given, chosen = parameters](CancelFlag cancel) -> BackgroundRun::Delivery {
     QElapsedTimer clock;
     clock.start();
     TissueClassificationParameters parameters = chosen;
     parameters.cancel = cancel;
+    if (preopImage) takePreoperativeImage(parameters, *preopImage, *preopLabels, *rigid);
     const TissueClassificationResult result = classifyTissues(*image, *preopLabels, *rigid, given, parameters);
     const double seconds = clock.elapsed() / 1000.0;
     return [this, result, seconds] { finish(result, seconds); };

@@ -28,6 +28,9 @@ public:
 
   NodeSelector* intraopSelector() const { return intraop_; }
   NodeSelector* preopLabelsSelector() const { return preopLabels_; }
+  /// Optional, as on the command line: the tumour's look before surgery and where tissue was
+  /// (takePreoperativeImage); offers the scene's volumes of the "preop" role.
+  NodeSelector* preopImageSelector() const { return preopImage_; }
   NodeSelector* transformSelector() const { return transform_; }
   /// The tissue a pick adds (a label of TissueClassificationLogic's tissueName).
   QComboBox* pickTissueBox() const { return pickTissue_; }
@@ -57,7 +60,7 @@ private:
   void showPrototypeCounts();
 
   Scene& scene_;
-  NodeSelector *intraop_, *preopLabels_, *transform_;
+  NodeSelector *intraop_, *preopLabels_, *preopImage_, *transform_;
   QComboBox* pickTissue_;
   QPushButton *pick_, *clear_;
   QSpinBox* k_;

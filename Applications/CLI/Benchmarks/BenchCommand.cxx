@@ -228,6 +228,7 @@ ClassificationScore classifyCase(const SimulatedCase& c, bool n4)
   const RigidRegistrationResult rigid = registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, {});
   TissueClassificationParameters parameters;
   parameters.biasCorrection = n4;
+  takePreoperativeImage(parameters, *c.preopImage, *c.preopLabels, *rigid.intraopToPreop);
   Stopwatch clock;
   ClassificationScore score{};
   score.result = classifyTissues(*c.intraopImage, *c.preopLabels, *rigid.intraopToPreop, std::nullopt, parameters);

@@ -152,8 +152,10 @@ void sweepShifts(const SurfaceBenchOptions& o, const CaseParameters& defaults, c
     const SimulatedCase c = simulateCase(parameters);
     const RigidRegistrationResult rigid = registerRigidly(*c.intraopImage, *c.preopImage, c.preopLabels, {});
     if (!rigid.trustworthy) throw MethodError("bench surface: the rigid registration failed at shift " + std::to_string(shift));
+    TissueClassificationParameters classification;
+    takePreoperativeImage(classification, *c.preopImage, *c.preopLabels, *rigid.intraopToPreop);
     const TissueClassificationResult classified =
-      classifyTissues(*c.intraopImage, *c.preopLabels, *rigid.intraopToPreop, std::nullopt, TissueClassificationParameters{});
+      classifyTissues(*c.intraopImage, *c.preopLabels, *rigid.intraopToPreop, std::nullopt, classification);
     for (const std::string& method : o.methods) {
       table.row("shift", shift, "truth", method, scoreSurface(c, mesh, *c.intraopLabels, *rigid.intraopToPreop, method));
       table.row("shift", shift, "classified", method, scoreSurface(c, mesh, *classified.labels, *rigid.intraopToPreop, method));

@@ -276,10 +276,15 @@ SerialScans)
   [ "$(json_value "$later/report.json" "['stages']['mesh']['nodes']")" = "$(json_value "$first/report.json" "['stages']['mesh']['nodes']")" ] ||
     fail "the reused mesh's figures differ"
   # The same scan again: the same surface displacements (the reused fit is the one found before).
-  for key in mean_displacement_mm max_displacement_mm mean_residual_mm; do
+  # The later scan's rigid start differs by about 0.02 mm, and the classification reads the
+  # preoperative image through it: the means stay within 0.02 mm, the largest displacement (one
+  # node's) within 0.05 (8.10 against 8.12 mm measured). A wrong fit reused moves them by millimetres.
+  for key in mean_displacement_mm:0.02 max_displacement_mm:0.05 mean_residual_mm:0.02; do
+    tolerance=${key#*:}
+    key=${key%:*}
     value=$(json_value "$first/report.json" "['stages']['surface']['$key']")
-    float_check "$later/report.json" "['stages']['surface']['$key']" "< $value + 0.02"
-    float_check "$later/report.json" "['stages']['surface']['$key']" "> $value - 0.02"
+    float_check "$later/report.json" "['stages']['surface']['$key']" "< $value + $tolerance"
+    float_check "$later/report.json" "['stages']['surface']['$key']" "> $value - $tolerance"
   done
   for scan in "$first" "$later"; do
     "$brainshift" evaluate --transform "$scan/intraop_to_preop.h5" --landmarks "$case_dir/landmarks.csv" --json "$scan/tre.json" \

@@ -3,7 +3,8 @@
 // slices. Above the sunken top face the mapping must show the preoperative space above the brain,
 // so the boundary the warped labels show is the deformed face (within half a millimetre). The fade
 // alone (continuationMaximumMm 0) averages the smaller corrections deeper inside and shows the
-// boundary more than a millimetre too high: the failure the continuation fixes. Neither folds.
+// boundary more than a millimetre too high: the failure the continuation fixes. Neither folds; a
+// band too narrow for the sink folds outside the mesh only, and the folds are counted apart.
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "DeformationField.h"
@@ -133,6 +134,16 @@ int DeformationFieldBoundaryTest(int, char*[])
     BS_CHECK_MSG(continued.foldedVoxels == 0 && continued.minimumJacobian > 0.1, continued.foldedVoxels << " folded, min "
                                                                                   << continued.minimumJacobian);
     BS_CHECK(faded.foldedVoxels == 0);
+    BS_CHECK(continued.foldedVoxelsInMesh == 0);
+    // A band narrower than the sink (4 mm for 6) compresses the space above the face past zero: the
+    // field folds there, outside the mesh, and the folds are told apart from the brain's (none).
+    DeformationFieldParameters narrow;
+    narrow.continuationMaximumMm = 4.0;
+    const DeformationField squeezed = intraopToPreopField(mesh, *identity, grid, narrow, "mesh.vtu");
+    std::cout << "band of " << squeezed.continuationBandMm << " mm: " << squeezed.foldedVoxels << " folded, "
+              << squeezed.foldedVoxelsInMesh << " of them in the mesh\n";
+    BS_CHECK_MSG(squeezed.foldedVoxels >= 50, squeezed.foldedVoxels << " folded: the narrow band no longer folds");
+    BS_CHECK_MSG(squeezed.foldedVoxelsInMesh == 0, squeezed.foldedVoxelsInMesh << " folded in the mesh");
     DeformationFieldParameters absurd;
     absurd.continuationMaximumCompression = 0;
     BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "continuation");

@@ -52,7 +52,7 @@ int TissueClassificationContrastTest(int, char*[])
     for (bool resection : {true, false}) {
       const testing::ClassifiedCase c = t2Case(resection);
       TissueClassificationParameters parameters;
-      parameters.preopTumourContrast = preoperativeTumourContrast(*c.simulated.preopImage, *c.simulated.preopLabels);
+      takePreoperativeImage(parameters, *c.simulated.preopImage, *c.simulated.preopLabels, *c.rigid);
       const TissueClassificationResult result =
         classifyTissues(*c.simulated.intraopImage, *c.simulated.preopLabels, *c.rigid, std::nullopt, parameters);
       const ScanContrast& learned = result.contrast;

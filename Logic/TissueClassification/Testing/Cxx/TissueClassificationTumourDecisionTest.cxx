@@ -35,7 +35,7 @@ int TissueClassificationTumourDecisionTest(int, char*[])
     for (bool resection : {true, false}) {
       const testing::ClassifiedCase c = lowFieldCase(resection);
       TissueClassificationParameters parameters;
-      parameters.preopTumourContrast = preoperativeTumourContrast(*c.simulated.preopImage, *c.simulated.preopLabels);
+      takePreoperativeImage(parameters, *c.simulated.preopImage, *c.simulated.preopLabels, *c.rigid);
       // A hypointense tumour: between the fluid (0) and the parenchyma (1), nearer the fluid.
       BS_CHECK_MSG(parameters.preopTumourContrast > 0.15 && parameters.preopTumourContrast < 0.6, parameters.preopTumourContrast);
       const TissueClassificationResult result =

@@ -1,4 +1,5 @@
-// The tissue classification panel on the small built-in case: automatic prototypes give the
+// The tissue classification panel on the small built-in case (given the preoperative MRI, as the
+// command line is): automatic prototypes give the
 // intraoperative labels in the scene (checked against the truth); a point picked in the views
 // while Pick is on becomes a prototype of the chosen tissue and the next run uses the list; a
 // prototype outside the image is the logic's error in the panel, the scene's labels untouched.
@@ -60,7 +61,8 @@ int TissueClassificationPanelTest(int argc, char* argv[])
     Scene scene;
     auto intraop = scene.add(ScalarVolumeNode::create("intraop image", c.intraopImage));
     intraop->setRole("intraop");
-    scene.add(ScalarVolumeNode::create("preop image", c.preopImage))->setRole("preop");
+    auto preop = scene.add(ScalarVolumeNode::create("preop image", c.preopImage));
+    preop->setRole("preop");
     scene.add(LabelMapVolumeNode::create("preop labels", c.preopLabels));
     scene.add(TransformNode::create("rigid intraop_to_preop", c.rigidIntraopToPreop));
 
@@ -70,6 +72,8 @@ int TissueClassificationPanelTest(int argc, char* argv[])
     TissueClassificationPanel panel(scene, context);
     BS_CHECK(pick && panel.pickButton()->isEnabled());
     BS_CHECK(panel.intraopSelector()->currentNode() == intraop);
+    // The preoperative MRI, as the command line passes it (offered: the "preop" volumes only).
+    BS_CHECK(panel.preopImageSelector()->currentNode() == preop && panel.preopImageSelector()->count() == 1);
     QSignalSpy finished(&panel, &TissueClassificationPanel::runFinished);
 
     // Automatic prototypes.
