@@ -282,6 +282,13 @@ public:
     }
     check(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
     check(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    // Symmetric positive definite, and stays so through every elimination (1 on the diagonal of a
+    // fixed dof) and soft constraint (H^T W H added): said once for good. A factorisation then
+    // takes it without pivoting (MUMPS's SYM=1, not the symmetric indefinite SYM=2, whose pivots
+    // follow the rounding of the ranks' sums and once outgrew MUMPS's memory estimate: KSP reason
+    // -11 in a fresh-clone run of FiniteElementSessionTest).
+    check(MatSetOption(A_, MAT_SPD, PETSC_TRUE), "MatSetOption");
+    check(MatSetOption(A_, MAT_SPD_ETERNAL, PETSC_TRUE), "MatSetOption");
     {
       std::int64_t mineCount = std::int64_t(myTetrahedra.size());
       result_.tetrahedraPerRank.resize(std::size_t(size));
@@ -492,7 +499,7 @@ public:
     if (reason <= 0) {
       throw WorkerFailure(3, "the solver (" + result.solver + ") did not converge: KSP reason " + std::to_string(int(reason)) +
                                " after " + std::to_string(result.iterations) + " iterations, relative residual " +
-                               std::to_string(result.relativeResidual));
+                               std::to_string(result.relativeResidual) + preconditionerFailure(reason));
     }
     requireTrueResidual(result);
     // The imposed values exactly (the solver met them only to its tolerance).
@@ -575,6 +582,28 @@ public:
   }
 
 private:
+  /// Why the preconditioner failed (KSP reason -11), for the message: PETSc's reason on any rank
+  /// and, for a MUMPS factorisation, MUMPS's own error code (INFOG(1), INFOG(2)); empty otherwise.
+  std::string preconditionerFailure(KSPConvergedReason reason) const
+  {
+    if (reason != KSP_DIVERGED_PC_FAILED) return {}; // the same on every rank: all or none come here
+    PC pc = nullptr;
+    PCFailedReason local = PC_NOERROR;
+    if (KSPGetPC(ksp_, &pc) || PCGetFailedReasonRank(pc, &local)) local = PC_NOERROR;
+    // The ranks agree on the KSP reason, not on the PC's: a rank's failure, whichever (none: -1000).
+    const int mine = local == PC_NOERROR ? -1000 : int(local);
+    int any = mine;
+    MPI_Allreduce(&mine, &any, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD);
+    std::string text = "; the preconditioner failed: " + std::string(any == -1000 ? "on no rank's own account" : PCFailedReasons[any]);
+    MatSolverType package = nullptr;
+    Mat factor = nullptr;
+    PetscInt infog1 = 0, infog2 = 0;
+    if (!PCFactorGetMatSolverType(pc, &package) && package && std::strcmp(package, MATSOLVERMUMPS) == 0 &&
+        !PCFactorGetMatrix(pc, &factor) && !MatMumpsGetInfog(factor, 1, &infog1) && !MatMumpsGetInfog(factor, 2, &infog2)) {
+      text += " (MUMPS INFOG(1) " + std::to_string(infog1) + ", INFOG(2) " + std::to_string(infog2) + ")";
+    }
+    return text;
+  }
 
   /// Zeroes the rows and columns of the fixed dofs of A (1 on the diagonal), keeping it symmetric.
   void eliminate(const std::vector<std::int32_t>& fixedNodes)

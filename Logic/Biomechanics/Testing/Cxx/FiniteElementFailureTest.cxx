@@ -5,6 +5,7 @@
 #include "FiniteElementTestSupport.h"
 
 #include <chrono>
+#include <cstring>
 #include <thread>
 
 int FiniteElementFailureTest(int, char*[])
@@ -40,10 +41,23 @@ int FiniteElementFailureTest(int, char*[])
     job.solverOptions = "-ksp_type cg -pc_type none -ksp_max_it 2 -ksp_rtol 1e-12";
     BS_CHECK_THROWS(solveWithWorker(job, testing::workerOptions()), MethodError, "did not converge");
 
-    // A worker that hangs: a timeout stops the whole process group, quickly.
+    // A larger job: 24^3 cubes (a solve without a preconditioner that would run for days).
     FiniteElementJob big = testing::cubeMesh(24, 40.0);
     testing::imposeOnBoundary(big, 40.0, shift);
     big.solverOptions = "-ksp_type cg -pc_type none -ksp_rtol 1e-300 -ksp_atol 0 -ksp_max_it 100000000";
+    // A factorisation that fails (MUMPS on two ranks, allowed 1 MB of working memory): the message
+    // says why, with MUMPS's own error code, so that a failure seen once can be told apart.
+    FiniteElementJob starved = big;
+    starved.solverOptions = "-ksp_type preonly -pc_type cholesky -pc_factor_mat_solver_type mumps -mat_mumps_icntl_23 1";
+    try {
+      solveWithWorker(starved, testing::workerOptions(2));
+      BS_CHECK_MSG(false, "a factorisation given 1 MB solved");
+    } catch (const MethodError& e) {
+      std::cout << e.what() << '\n';
+      BS_CHECK_MSG(std::strstr(e.what(), "the preconditioner failed") && std::strstr(e.what(), "MUMPS INFOG(1) -"), e.what());
+    }
+
+    // A worker that hangs: a timeout stops the whole process group, quickly.
     FiniteElementRunOptions impatient = testing::workerOptions(2);
     impatient.timeoutSeconds = 1.5;
     const auto start = std::chrono::steady_clock::now();
