@@ -640,9 +640,10 @@ DemoEndToEnd)
 
 HardScenario)
   # A hard scenario end to end (small): a 15 mm sink under a right frontal craniotomy, fluid under
-  # air in the gap and the cavity, a bright cavity rim, 5 % noise, 30 % bias. Measured: TRE 0.94 mm
-  # mean against 2.51 for the rigid registration, p95 2.29 against 8.15, craniotomy 1.40 against
-  # 6.56, near the cavity 1.34 against 6.41.
+  # air in the gap and the cavity, a bright cavity rim, 5 % noise, 30 % bias. Measured: TRE 0.65 mm
+  # mean against 2.51 for the rigid registration, p95 1.65 against 8.15, craniotomy 0.88 against
+  # 6.56, near the cavity 0.88 against 6.41 (0.94, 2.29, 1.40, 1.34 before the gap took the fluid
+  # pooled over the sunken brain).
   hard=$work/hard-scenario
   rm -rf "$hard"
   "$brainshift" demo --size small --scenario rf15-cavityrim --output-dir "$hard" > "$work/hard-scenario.log" 2>&1 \
@@ -658,11 +659,14 @@ HardScenario)
   float_check "$e" "['transforms']['brainshift']['groups']['craniotomy']['mean_mm']" "< 0.3 * $rigid_craniotomy"
   float_check "$e" "['transforms']['brainshift']['groups']['near-cavity']['mean_mm']" "< 0.3 * $rigid_cavity"
   [ "$(json_value "$hard/report.json" "['trust']['nonrigid']")" = "trusted" ] || fail "the hard scenario's update was not trusted"
-  # The brain boundary under the craniotomy, as the whole transform shows it: measured 2.00 mm mean
-  # against 7.50 for the rigid registration (the surface's nodes stop 1.97 mm short on this coarse
-  # case; the field as it was before it carried the correction across the boundary: 2.98 mm).
+  # The brain boundary under the craniotomy, as the whole transform shows it: measured 1.23 mm mean
+  # against 7.50 for the rigid registration (the surface's nodes stop 0.94 mm short on this coarse
+  # case). 2.00 before the classification's gap took the fluid pooled over the sunken brain
+  # (classify.fluid_joined_to_gaps_ml), 2.98 before the field carried the correction across the
+  # boundary: both fail the bound.
   rigid_boundary=$(json_value "$e" "['boundary_under_craniotomy']['shown']['brainshift_rigid']['mean_abs_mm']")
-  float_check "$e" "['boundary_under_craniotomy']['shown']['brainshift']['mean_abs_mm']" "< 0.35 * $rigid_boundary"
+  float_check "$e" "['boundary_under_craniotomy']['shown']['brainshift']['mean_abs_mm']" "< 0.22 * $rigid_boundary"
+  float_check "$hard/report.json" "['stages']['classify']['fluid_joined_to_gaps_ml']" "> 0.2"
   float_check "$hard/report.json" "['stages']['surface']['directional_nodes']" "> 100"
   # The refine stage (by default only in T2-like scans: elsewhere it made the scenarios worse,
   # README) runs when asked and reports each pass.
