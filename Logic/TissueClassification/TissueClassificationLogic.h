@@ -48,12 +48,11 @@ TumourResection tumourResectionFromString(const std::string& text); ///< InputEr
 double preoperativeTumourContrast(const ScalarImage& preopImage, const LabelImage& preopLabels);
 
 /// The medians of the preoperative image over the ventricles (fluid) and the parenchyma; NaN where
-/// a tissue is missing or the grids differ.
+/// a tissue is missing.
 struct PreoperativeFluidAndParenchyma {
   double fluid = std::numeric_limits<double>::quiet_NaN();
   double parenchyma = std::numeric_limits<double>::quiet_NaN();
 };
-PreoperativeFluidAndParenchyma preoperativeFluidAndParenchyma(const ScalarImage& preopImage, const LabelImage& preopLabels);
 
 /// The preoperative image as the classification reads it: through the rigid transform (also when
 /// the spatial prior is the refine pass's warped labels), tissue where a value is nearer the
@@ -120,7 +119,9 @@ struct TissueClassificationParameters {
   /// through fluid within gapReachMm (the path's length in mm, at least one voxel step each way),
   /// where the preoperative image showed tissue: the sheet of fluid pooled over a sunken brain,
   /// which 2.5 mm slices leave too thin for the opening, and which was brain before it sank. Fluid
-  /// that was fluid before surgery (sulci, cisterns) stays brain. Empty: no growth.
+  /// that was fluid before surgery (sulci, cisterns) stays brain, and so do the ventricles (moved,
+  /// they lie where tissue was). Empty, or where the scan's fluid is brighter than its parenchyma
+  /// (T2: the cortex with its CSF looks like fluid there): no growth.
   std::optional<PreoperativeImageLook> preopLook;
   double gapReachMm = 3.0;
   std::uint64_t seed = 2000;
@@ -137,7 +138,8 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
 
 /// What the preoperative image tells the classification, set on `parameters`: the tumour's look
 /// before surgery (preopTumourContrast) and where tissue was (preopLook, through `intraopToPreop`).
-/// Every front end that has the preoperative image calls it.
+/// Every front end that has the preoperative image calls it. InputError when the image and the
+/// labels are not on one grid.
 void takePreoperativeImage(TissueClassificationParameters& parameters, const ScalarImage& preopImage,
                            const LabelImage& preopLabels, const SpatialTransform& intraopToPreop);
 

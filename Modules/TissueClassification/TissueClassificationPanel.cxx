@@ -19,8 +19,9 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   preopImage_ = new NodeSelector({NodeKind::ScalarVolume}, "preop", this); // the preoperative MRI, not an overlay
-  preopImage_->setToolTip(tr("Optional: the preoperative MRI on the labels' grid. With it the gap under the craniotomy "
-                             "takes the fluid pooled over the sunken brain, and the tumour is compared with its look before surgery"));
+  preopImage_->setToolTip(tr("The preoperative MRI on the labels' grid (the scene's \"preop\" volumes; without one the "
+                             "classification runs without it). With it the gap under the craniotomy takes the fluid pooled "
+                             "over the sunken brain, and the tumour is compared with its look before surgery"));
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
   k_ = new QSpinBox(this);
   k_->setRange(1, 101);

@@ -52,11 +52,12 @@ std::string solverOptionsFor(const std::string& solver, double rtol)
   std::snprintf(tolerance, sizeof tolerance, " -ksp_rtol %.3g", rtol);
   if (solver == "cg+gamg") return std::string("-ksp_type cg -pc_type gamg") + tolerance;
   if (solver == "cg+hypre") return std::string("-ksp_type cg -pc_type hypre -pc_hypre_type boomeramg") + tolerance;
-  // Block Jacobi, one block per rank: with PETSc's ILU(0) in each block (not always positive: CG
-  // can break down on it), or with incomplete Cholesky, shifted to stay positive definite.
-  if (solver == "cg+bjacobi") return std::string("-ksp_type cg -pc_type bjacobi -ksp_max_it 20000") + tolerance;
+  // Block Jacobi, one block per rank: with ILU(0) in each block (not always positive: CG can break
+  // down on it), or with incomplete Cholesky, shifted to stay positive definite. ILU named: on the
+  // matrix the worker declares SPD, PETSc's default in the blocks is incomplete Cholesky.
+  if (solver == "cg+bjacobi") return std::string("-ksp_type cg -pc_type bjacobi -sub_pc_type ilu -ksp_max_it 20000") + tolerance;
   if (solver == "cg+icc") return std::string("-ksp_type cg -pc_type bjacobi -sub_pc_type icc -ksp_max_it 20000") + tolerance;
-  if (solver == "gmres+bjacobi") return std::string("-ksp_type gmres -pc_type bjacobi -ksp_max_it 20000") + tolerance;
+  if (solver == "gmres+bjacobi") return std::string("-ksp_type gmres -pc_type bjacobi -sub_pc_type ilu -ksp_max_it 20000") + tolerance;
   if (solver == "cholesky+cholmod") return "-ksp_type preonly -pc_type cholesky -pc_factor_mat_solver_type cholmod";
   if (solver == "cholesky+mumps") return "-ksp_type preonly -pc_type cholesky -pc_factor_mat_solver_type mumps";
   throw InputError("--solvers: unknown solver '" + solver +

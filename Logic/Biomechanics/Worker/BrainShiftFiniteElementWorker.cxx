@@ -283,7 +283,9 @@ public:
     check(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
     check(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
     // Symmetric positive definite, and stays so through every elimination (1 on the diagonal of a
-    // fixed dof) and soft constraint (H^T W H added): said once for good. A factorisation then
+    // fixed dof) and soft constraint (H^T W H added): said once for good. (Positive definite as long
+    // as the fixed nodes pin every piece of the mesh, as the surface's imposed nodes do; a piece
+    // left free is singular either way, and its solve fails its true-residual check.) A factorisation then
     // takes it without pivoting (MUMPS's SYM=1, not the symmetric indefinite SYM=2, whose pivots
     // follow the rounding of the ranks' sums and once outgrew MUMPS's memory estimate: KSP reason
     // -11 in a fresh-clone run of FiniteElementSessionTest).
@@ -480,6 +482,15 @@ public:
     result.solveSeconds = maxOverRanks(MPI_Wtime() - clock);
     KSPConvergedReason reason;
     check(KSPGetConvergedReason(ksp_, &reason), "KSPGetConvergedReason");
+    {
+      // A preconditioner that fails on some ranks only (preonly with a rank's own block) sets the
+      // reason there only: the ranks take the worst, so that all fail together (and all come to the
+      // collective of preconditionerFailure).
+      const int local = int(reason);
+      int worst = local;
+      MPI_Allreduce(&local, &worst, 1, MPI_INT, MPI_MIN, PETSC_COMM_WORLD);
+      if (worst <= 0) reason = KSPConvergedReason(worst);
+    }
     result.convergedReason = int(reason);
     PetscInt iterations;
     check(KSPGetIterationNumber(ksp_, &iterations), "KSPGetIterationNumber");
@@ -586,7 +597,7 @@ private:
   /// and, for a MUMPS factorisation, MUMPS's own error code (INFOG(1), INFOG(2)); empty otherwise.
   std::string preconditionerFailure(KSPConvergedReason reason) const
   {
-    if (reason != KSP_DIVERGED_PC_FAILED) return {}; // the same on every rank: all or none come here
+    if (reason != KSP_DIVERGED_PC_FAILED) return {}; // reduced over the ranks: all or none come here
     PC pc = nullptr;
     PCFailedReason local = PC_NOERROR;
     if (KSPGetPC(ksp_, &pc) || PCGetFailedReasonRank(pc, &local)) local = PC_NOERROR;
