@@ -1,5 +1,7 @@
 #include "BlockMatching.h"
 
+#include "DistanceMaps.h"
+
 #include <itkIdentityTransform.h>
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkNearestNeighborInterpolateImageFunction.h>
@@ -15,32 +17,6 @@
 #include <thread>
 
 namespace brainshift {
-
-// The depth is the distance to the nearest boundary voxel (a brain voxel with a non-brain voxel
-// among its 26 neighbours), the zero level of ITK's signed Maurer distance. A ball about a brain
-// centre that holds a non-brain voxel holds such a boundary voxel too (the path towards the centre
-// crosses one), so "every offset brain" is "no boundary voxel nearer than depthMm".
-std::vector<std::array<int, 3>> depthTestOffsets(const std::array<double, 3>& spacing, double depthMm)
-{
-  std::array<int, 3> reach{};
-  for (std::size_t a = 0; a < 3; ++a) reach[a] = int(std::ceil(depthMm / spacing[a])) + 1;
-  std::vector<std::array<int, 3>> neighbour; // the voxel itself and its 26 neighbours
-  for (int c = -1; c <= 1; ++c)
-    for (int b = -1; b <= 1; ++b)
-      for (int a = -1; a <= 1; ++a) neighbour.push_back({a, b, c});
-  std::vector<std::array<int, 3>> offsets;
-  for (int z = -reach[2]; z <= reach[2]; ++z)
-    for (int y = -reach[1]; y <= reach[1]; ++y)
-      for (int x = -reach[0]; x <= reach[0]; ++x) {
-        bool reached = false;
-        for (const auto& f : neighbour) {
-          const double dx = (x - f[0]) * spacing[0], dy = (y - f[1]) * spacing[1], dz = (z - f[2]) * spacing[2];
-          reached = reached || dx * dx + dy * dy + dz * dz < depthMm * depthMm;
-        }
-        if (reached) offsets.push_back({x, y, z});
-      }
-  return offsets;
-}
 
 namespace {
 
@@ -451,11 +427,11 @@ MatchingVolumes prepareVolumes(const ScalarImage& preopImage, const LabelImage& 
 }
 
 /// Whether the centre and every offset from it are brain (false where an offset leaves the grid).
-bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vector<std::array<int, 3>>& offsets)
+bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vector<std::array<long, 3>>& offsets)
 {
   const auto& size = v.remapped.size;
   for (const auto& o : offsets) {
-    const int x = i + o[0], y = j + o[1], z = k + o[2];
+    const int x = i + int(o[0]), y = j + int(o[1]), z = k + int(o[2]);
     if (x < 0 || y < 0 || z < 0 || x >= size[0] || y >= size[1] || z >= size[2]) return false;
     if (!v.preopBrain[v.remapped.at(x, y, z)]) return false;
   }
@@ -468,9 +444,9 @@ bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vecto
 std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h, int stride, const BlockMatchingParameters& parameters,
                                                  std::size_t& found)
 {
-  const auto gridSpacing = v.grid->GetSpacing();
-  const std::vector<std::array<int, 3>> depthOffsets =
-    depthTestOffsets({gridSpacing[0], gridSpacing[1], gridSpacing[2]}, parameters.minimumDepthMm);
+  // Deep enough: no boundary voxel nearer than the depth, as voxelsAtLeastDeep tests it (the
+  // signed Maurer distance's test, DistanceMapsTest), at the lattice's centres alone.
+  const std::vector<std::array<long, 3>> depthOffsets = depthTestOffsets(v.grid->GetSpacing(), parameters.minimumDepthMm);
   const Volume<float>& image = v.remapped;
   auto excludedAt = [&](std::size_t at) {
     const auto& excluded = parameters.excludedLabels;

@@ -78,10 +78,4 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
                                 const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
                                 const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters);
 
-/// The block centres' depth test without a distance map: the voxel offsets (x, y, z) that must all
-/// be brain for a brain voxel to lie at least `depthMm` deep (its signed Maurer distance to the
-/// brain's boundary <= -depthMm): the open ball of that radius on a grid of `spacingMm`, grown by
-/// one voxel in every direction.
-std::vector<std::array<int, 3>> depthTestOffsets(const std::array<double, 3>& spacingMm, double depthMm);
-
 } // namespace brainshift

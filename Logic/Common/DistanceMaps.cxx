@@ -102,10 +102,15 @@ namespace brainshift {
 // A boundary voxel nearer than depthMm exists exactly when the open ball about the voxel, grown by
 // one voxel, holds a voxel of the complement: a complement voxel in the ball makes the path towards
 // the centre cross a boundary voxel, itself in the ball.
+std::vector<std::array<long, 3>> depthTestOffsets(const MaskImage::SpacingType& spacing, double depthMm)
+{
+  return ballOffsets(spacing, depthMm, false, true);
+}
+
 MaskImage::Pointer voxelsAtLeastDeep(const MaskImage* mask, double depthMm)
 {
   MaskImage::Pointer deep = emptyLike(mask);
-  const std::vector<Offset> offsets = ballOffsets(mask->GetSpacing(), depthMm, false, true);
+  const std::vector<Offset> offsets = depthTestOffsets(mask->GetSpacing(), depthMm);
   const MaskLookup in = lookupOf(mask);
   unsigned char* out = deep->GetBufferPointer();
   std::size_t n = 0;

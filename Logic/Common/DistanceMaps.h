@@ -2,6 +2,9 @@
 // Distance maps of binary masks, shared by the stages (ITK's Maurer transform stays in the .cxx).
 #include "ImageTypes.h"
 
+#include <array>
+#include <vector>
+
 namespace brainshift {
 
 using MaskImage = itk::Image<unsigned char, 3>;
@@ -22,6 +25,12 @@ ScalarImage::Pointer boundaryDistanceMm(const MaskImage* mask);
 /// their grid, and for small depths. A mask touching the grid's edge: ITK sees no boundary there,
 /// this sees one (the outside counts as complement).
 MaskImage::Pointer voxelsAtLeastDeep(const MaskImage* mask, double depthMm);
+
+/// The offsets voxelsAtLeastDeep tests about a mask voxel on `spacing`: the voxel is at least
+/// `depthMm` deep exactly when every one of them is in the mask (the open ball of that radius,
+/// grown by one voxel: a complement voxel in it makes the path towards the centre cross a boundary
+/// voxel). For callers that test a few voxels, not the whole mask (block matching's centres).
+std::vector<std::array<long, 3>> depthTestOffsets(const MaskImage::SpacingType& spacing, double depthMm);
 
 /// The voxels within `reachMm` of the mask: signedDistanceMm(mask) <= reachMm (the mask itself and
 /// the complement's voxels that close to a mask voxel), found without a distance map.

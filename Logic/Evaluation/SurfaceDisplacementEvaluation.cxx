@@ -34,9 +34,7 @@ ScalarImage::Pointer brainBoundaryDistanceMm(const LabelImage& labels, const std
   for (std::size_t i = 0, n = labels.GetLargestPossibleRegion().GetNumberOfPixels(); i < n; ++i) m[i] = brainLabels.count(l[i]) ? 1 : 0;
   return boundaryDistanceMm(mask);
 }
-} // namespace
 
-namespace {
 using Vec = Eigen::Vector3d;
 
 Vec toVec(const PhysicalPoint& p) { return {p[0], p[1], p[2]}; }
@@ -62,25 +60,58 @@ double mean(const std::vector<double>& values)
   for (double v : values) sum += v;
   return values.empty() ? 0 : sum / double(values.size());
 }
-} // namespace
 
-SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, const SpatialTransform& truth,
-                                                        const SpatialTransform& rigidUsed, const LabelImage& preopLabels,
-                                                        const std::set<LabelPixel>& brainLabels)
+/// y -> A y + t and its inverse, of a linear transform.
+struct AffineMap {
+  Eigen::Matrix3d A = Eigen::Matrix3d::Identity();
+  Vec t = Vec::Zero();
+  Vec operator()(const Vec& y) const { return A * y + t; }
+  AffineMap inverse() const
+  {
+    AffineMap m;
+    m.A = A.inverse();
+    m.t = -(m.A * t);
+    return m;
+  }
+};
+
+AffineMap affineMapOf(const SpatialTransform& transform)
+{
+  const AffineParameters p = affineParametersOf(&transform);
+  AffineMap m;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) m.A(i, j) = p.matrix[i][j];
+    m.t[i] = p.translation[i];
+  }
+  return m;
+}
+
+/// Calls visit(x0, x1, u) for every imposed node of the active surface: its preoperative place
+/// x0, its deformed place x1 = x0 + u (the model's frame). std::invalid_argument without the
+/// surface's "Displacement" (3 components) and "Imposed" point arrays.
+template <typename Visit>
+void forEachImposedNode(vtkPolyData* surface, Visit&& visit)
 {
   vtkDataArray* displacement = surface->GetPointData()->GetArray("Displacement");
   vtkDataArray* imposed = surface->GetPointData()->GetArray("Imposed");
   if (!displacement || displacement->GetNumberOfComponents() != 3 || !imposed) {
     throw std::invalid_argument("the surface has no point arrays \"Displacement\" (3 components) and \"Imposed\"");
   }
-  const AffineParameters rigid = affineParametersOf(&rigidUsed);
-  Eigen::Matrix3d A;
-  Vec t;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) A(i, j) = rigid.matrix[i][j];
-    t[i] = rigid.translation[i];
+  for (vtkIdType i = 0; i < surface->GetNumberOfPoints(); ++i) {
+    if (imposed->GetComponent(i, 0) < 0.5) continue;
+    Vec x1, u;
+    surface->GetPoint(i, x1.data());
+    displacement->GetTuple(i, u.data());
+    visit(Vec(x1 - u), x1, u);
   }
-  const Eigen::Matrix3d Ainverse = A.inverse();
+}
+} // namespace
+
+SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, const SpatialTransform& truth,
+                                                        const SpatialTransform& rigidUsed, const LabelImage& preopLabels,
+                                                        const std::set<LabelPixel>& brainLabels)
+{
+  const AffineMap rigid = affineMapOf(rigidUsed), rigidInverse = rigid.inverse();
 
   // The preoperative brain's boundary distance (zero level on the voxel faces).
   const ScalarImage::Pointer distance = brainBoundaryDistanceMm(preopLabels, brainLabels);
@@ -89,31 +120,26 @@ SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, co
 
   SurfaceDisplacementAccuracy a;
   std::vector<double> errors, trueMagnitudes, residuals;
-  for (vtkIdType i = 0; i < surface->GetNumberOfPoints(); ++i) {
-    if (imposed->GetComponent(i, 0) < 0.5) continue;
-    Vec x1, u;
-    surface->GetPoint(i, x1.data());
-    displacement->GetTuple(i, u.data());
-    const Vec x0 = x1 - u;
+  forEachImposedNode(surface, [&](const Vec& x0, const Vec& x1, const Vec& u) {
     // y with T(y) = x0: Newton-like steps with the rigid part's matrix as the Jacobian.
-    Vec y = Ainverse * (x0 - t);
+    Vec y = rigidInverse(x0);
     for (int k = 0; k < 50; ++k) {
       const Vec r = x0 - toVec(truth.TransformPoint(toPoint(y)));
-      y += Ainverse * r;
+      y += rigidInverse.A * r;
       if (r.norm() < 1e-6) break;
     }
-    const Vec trueDisplacement = (A * y + t) - x0;
+    const Vec trueDisplacement = rigid(y) - x0;
     errors.push_back((u - trueDisplacement).norm());
     trueMagnitudes.push_back(trueDisplacement.norm());
     // Where the node ends against the true intraoperative boundary (through the truth, on the
     // fine preoperative grid), against where it started from the preoperative boundary.
     itk::ContinuousIndex<double, 3> end, start;
-    distance->TransformPhysicalPointToContinuousIndex(truth.TransformPoint(toPoint(Ainverse * (x1 - t))), end);
+    distance->TransformPhysicalPointToContinuousIndex(truth.TransformPoint(toPoint(rigidInverse(x1))), end);
     distance->TransformPhysicalPointToContinuousIndex(toPoint(x0), start);
     if (interpolator->IsInsideBuffer(end) && interpolator->IsInsideBuffer(start)) {
       residuals.push_back(std::abs(interpolator->EvaluateAtContinuousIndex(end) - interpolator->EvaluateAtContinuousIndex(start)));
     }
-  }
+  });
   a.nodes = errors.size();
   if (errors.empty()) return a;
   a.meanErrorMm = mean(errors);
@@ -144,31 +170,6 @@ SurfaceDisplacementAccuracy evaluateSurfaceDisplacement(vtkPolyData* surface, co
 namespace brainshift {
 
 namespace {
-/// y -> A y + t and its inverse, of a linear transform.
-struct AffineMap {
-  Eigen::Matrix3d A = Eigen::Matrix3d::Identity();
-  Vec t = Vec::Zero();
-  Vec operator()(const Vec& y) const { return A * y + t; }
-  AffineMap inverse() const
-  {
-    AffineMap m;
-    m.A = A.inverse();
-    m.t = -(m.A * t);
-    return m;
-  }
-};
-
-AffineMap affineMapOf(const SpatialTransform& transform)
-{
-  const AffineParameters p = affineParametersOf(&transform);
-  AffineMap m;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) m.A(i, j) = p.matrix[i][j];
-    m.t[i] = p.translation[i];
-  }
-  return m;
-}
-
 BoundaryDistances distancesOf(const std::vector<double>& signedMm)
 {
   BoundaryDistances b;
@@ -333,26 +334,16 @@ BoundaryDistances CraniotomyBoundaryEvaluation::shownBoundary(const SpatialTrans
 
 BoundaryDistances CraniotomyBoundaryEvaluation::imposedNodes(vtkPolyData* surface, const SpatialTransform& rigidUsed, bool undeformed) const
 {
-  vtkDataArray* displacement = surface->GetPointData()->GetArray("Displacement");
-  vtkDataArray* imposed = surface->GetPointData()->GetArray("Imposed");
-  if (!displacement || displacement->GetNumberOfComponents() != 3 || !imposed) {
-    throw std::invalid_argument("the surface has no point arrays \"Displacement\" (3 components) and \"Imposed\"");
-  }
   const AffineMap modelToIntraop = affineMapOf(rigidUsed).inverse();
   std::vector<double> distances;
-  for (vtkIdType i = 0; i < surface->GetNumberOfPoints(); ++i) {
-    if (imposed->GetComponent(i, 0) < 0.5) continue;
-    Vec x1, u;
-    surface->GetPoint(i, x1.data());
-    displacement->GetTuple(i, u.data());
-    const Vec x0 = x1 - u;
+  forEachImposedNode(surface, [&](const Vec& x0, const Vec& x1, const Vec&) {
     const Vec fromCentre = x0 - d->centre;
     const double along = fromCentre.dot(d->axis);
-    if (along < -d->nodeDepth || (fromCentre - along * d->axis).norm() > d->radius) continue;
+    if (along < -d->nodeDepth || (fromCentre - along * d->axis).norm() > d->radius) return;
     const Vec frame = d->trueRigid(modelToIntraop(undeformed ? x0 : x1));
     const double toTrue = Data::signedDistance(d->trueLocator, frame, d->carriedDistanceAt(*d->truth, frame) > 0);
     distances.push_back(toTrue - d->distanceAt(x0));
-  }
+  });
   return distancesOf(distances);
 }
 

@@ -1062,13 +1062,6 @@ WarpInputs readWarpInputs(RunContext& context)
   return inputs;
 }
 
-/// The confidence map of the update, made before the trust assessment has judged it (the files
-/// are written meanwhile); dropped, with an earlier run's file, when the rigid result stands in.
-ScalarImage::Pointer updateUncertainty(const WarpInputs& inputs, const DeformationField& deformation, nlohmann::json& entry)
-{
-  return uncertaintyOnScan(inputs.mesh, *deformation.field, inputs.meshFile.string(), entry);
-}
-
 struct WarpSeconds {
   double read = 0, field = 0, warp = 0, trust = 0, write = 0;
 };
@@ -1140,7 +1133,8 @@ void runWarpStage(RunContext& context)
   // The update's files are written into a staging folder while the trust assessment judges it (the
   // two share the machine's cores), and moved into place only when it is shown.
   nlohmann::json uncertaintyEntry = nullptr;
-  const ScalarImage::Pointer uncertainty = updateUncertainty(inputs, deformation, uncertaintyEntry);
+  // The confidence map, made before the trust has judged the update (dropped if it is rejected).
+  const ScalarImage::Pointer uncertainty = uncertaintyOnScan(inputs.mesh, *deformation.field, inputs.meshFile.string(), uncertaintyEntry);
   Stopwatch writeClock;
   const StagingFolder staging(context.output(".warp-staging"));
   std::future<WarpFiles> updateFiles = std::async(std::launch::async, [&] {

@@ -480,33 +480,12 @@ public:
     }
     check(KSPSolve(ksp_, b_, x_), "KSPSolve");
     result.solveSeconds = maxOverRanks(MPI_Wtime() - clock);
-    KSPConvergedReason reason;
-    check(KSPGetConvergedReason(ksp_, &reason), "KSPGetConvergedReason");
-    {
-      // A preconditioner that fails on some ranks only (preonly with a rank's own block) sets the
-      // reason there only: the ranks take the worst, so that all fail together (and all come to the
-      // collective of preconditionerFailure).
-      const int local = int(reason);
-      int worst = local;
-      MPI_Allreduce(&local, &worst, 1, MPI_INT, MPI_MIN, PETSC_COMM_WORLD);
-      if (worst <= 0) reason = KSPConvergedReason(worst);
-    }
+    const KSPConvergedReason reason = convergedReasonOverRanks();
     result.convergedReason = int(reason);
     PetscInt iterations;
     check(KSPGetIterationNumber(ksp_, &iterations), "KSPGetIterationNumber");
     result.iterations = int(iterations);
-    {
-      // The true relative residual, whatever norm the solver watched.
-      Vec r;
-      check(VecDuplicate(b_, &r), "VecDuplicate");
-      check(MatMult(A_, x_, r), "MatMult");
-      check(VecAYPX(r, -1.0, b_), "VecAYPX");
-      PetscReal residual, rhs;
-      check(VecNorm(r, NORM_2, &residual), "VecNorm");
-      check(VecNorm(b_, NORM_2, &rhs), "VecNorm");
-      result.relativeResidual = rhs > 0 ? double(residual / rhs) : double(residual);
-      VecDestroy(&r);
-    }
+    result.relativeResidual = trueRelativeResidual();
     if (reason <= 0) {
       throw WorkerFailure(3, "the solver (" + result.solver + ") did not converge: KSP reason " + std::to_string(int(reason)) +
                                " after " + std::to_string(result.iterations) + " iterations, relative residual " +
@@ -593,6 +572,33 @@ public:
   }
 
 private:
+  /// The solve's reason, the same on every rank: a preconditioner that fails on some ranks only
+  /// (preonly with a rank's own block) sets it there only, so the ranks take the worst, and all
+  /// fail together (and all come to the collective of preconditionerFailure).
+  KSPConvergedReason convergedReasonOverRanks() const
+  {
+    KSPConvergedReason reason;
+    check(KSPGetConvergedReason(ksp_, &reason), "KSPGetConvergedReason");
+    const int local = int(reason);
+    int worst = local;
+    MPI_Allreduce(&local, &worst, 1, MPI_INT, MPI_MIN, PETSC_COMM_WORLD);
+    return worst <= 0 ? KSPConvergedReason(worst) : reason;
+  }
+
+  /// ||b - A x|| / ||b||, whatever norm the solver watched (||b - A x|| when b is 0).
+  double trueRelativeResidual() const
+  {
+    Vec r;
+    check(VecDuplicate(b_, &r), "VecDuplicate");
+    check(MatMult(A_, x_, r), "MatMult");
+    check(VecAYPX(r, -1.0, b_), "VecAYPX");
+    PetscReal residual, rhs;
+    check(VecNorm(r, NORM_2, &residual), "VecNorm");
+    check(VecNorm(b_, NORM_2, &rhs), "VecNorm");
+    VecDestroy(&r);
+    return rhs > 0 ? double(residual / rhs) : double(residual);
+  }
+
   /// Why the preconditioner failed (KSP reason -11), for the message: PETSc's reason on any rank
   /// and, for a MUMPS factorisation, MUMPS's own error code (INFOG(1), INFOG(2)); empty otherwise.
   std::string preconditionerFailure(KSPConvergedReason reason) const

@@ -1,7 +1,8 @@
 // voxelsAtLeastDeep and voxelsWithin (the morphology without a distance map) give the voxels the
 // signed Maurer distance map gives (<= -depth, <= reach) voxel for voxel, on a mask of random
 // overlapping balls clear of the grid's edge (concave and convex boundaries, thin bridges), on an
-// isotropic and an anisotropic grid, at radii on and between voxel distances.
+// isotropic and two anisotropic grids, at radii on and between voxel distances. Block matching
+// tests its centres with the same offsets (depthTestOffsets).
 #include "BrainShiftTestingSupport.h"
 #include "DistanceMaps.h"
 #include "SyntheticData.h"
@@ -39,7 +40,8 @@ std::size_t disagreements(const MaskImage& found, const ScalarImage& distance, b
 int DistanceMapsTest(int, char*[])
 {
   return testing::runTest("DistanceMapsTest", [] {
-    for (const std::array<double, 3> spacing : {std::array<double, 3>{1.0, 1.0, 1.0}, std::array<double, 3>{0.9375, 0.9375, 2.5}}) {
+    for (const std::array<double, 3> spacing : {std::array<double, 3>{1.0, 1.0, 1.0}, std::array<double, 3>{0.9375, 0.9375, 2.5},
+                                                 std::array<double, 3>{0.9, 1.1, 2.5}}) {
       const MaskImage::Pointer mask = randomBalls(spacing, 2000);
       const ScalarImage::Pointer distance = signedDistanceMm(mask);
       std::size_t maskVoxels = 0;
