@@ -503,16 +503,30 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
 }
 
 namespace {
-/// The preoperative image's values over each brain tissue (none where the grids differ).
+/// The preoperative image's values over each brain tissue of the labels: voxel for voxel on one
+/// grid; on another (the contract does not tie the labels to the image's grid) the image
+/// interpolated at each label voxel's centre, those outside the image left out.
 std::map<LabelPixel, std::vector<float>> preoperativeBrainIntensities(const ScalarImage& preopImage, const LabelImage& preopLabels)
 {
   std::map<LabelPixel, std::vector<float>> values;
   const float* v = preopImage.GetBufferPointer();
   const LabelPixel* l = preopLabels.GetBufferPointer();
   const std::size_t n = preopLabels.GetLargestPossibleRegion().GetNumberOfPixels();
-  if (preopImage.GetLargestPossibleRegion().GetNumberOfPixels() != n) return values;
+  const bool oneGrid = ImageGeometry::of(&preopImage).sameGridAs(ImageGeometry::of(&preopLabels));
+  auto interpolator = itk::LinearInterpolateImageFunction<ScalarImage, double>::New();
+  interpolator->SetInputImage(&preopImage);
+  const auto size = preopLabels.GetLargestPossibleRegion().GetSize();
   for (std::size_t i = 0; i < n; ++i) {
-    if (l[i] >= Parenchyma && l[i] <= Tumour) values[l[i]].push_back(v[i]);
+    if (l[i] < Parenchyma || l[i] > Tumour) continue;
+    if (oneGrid) {
+      values[l[i]].push_back(v[i]);
+      continue;
+    }
+    PhysicalPoint x;
+    preopLabels.TransformIndexToPhysicalPoint({{itk::IndexValueType(i % size[0]), itk::IndexValueType((i / size[0]) % size[1]),
+                                                itk::IndexValueType(i / (size[0] * size[1]))}},
+                                              x);
+    if (interpolator->IsInsideBuffer(x)) values[l[i]].push_back(float(interpolator->Evaluate(x)));
   }
   return values;
 }
@@ -530,9 +544,6 @@ double tumourContrastOf(std::map<LabelPixel, std::vector<float>>& values)
 void takePreoperativeImage(TissueClassificationParameters& parameters, const ScalarImage& preopImage,
                            const LabelImage& preopLabels, const SpatialTransform& intraopToPreop)
 {
-  if (!ImageGeometry::of(&preopImage).sameGridAs(ImageGeometry::of(&preopLabels))) {
-    throw InputError("classification: the preoperative image and the preoperative labels are not on one grid");
-  }
   auto values = preoperativeBrainIntensities(preopImage, preopLabels); // once for both
   parameters.preopTumourContrast = tumourContrastOf(values);
   parameters.preopLook = PreoperativeImageLook{&preopImage, &intraopToPreop, {median(values[Ventricles]), median(values[Parenchyma])}};

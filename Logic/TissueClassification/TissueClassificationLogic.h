@@ -138,8 +138,8 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
 
 /// What the preoperative image tells the classification, set on `parameters`: the tumour's look
 /// before surgery (preopTumourContrast) and where tissue was (preopLook, through `intraopToPreop`).
-/// Every front end that has the preoperative image calls it. InputError when the image and the
-/// labels are not on one grid.
+/// Every front end that has the preoperative image calls it. The labels may lie on another grid
+/// than the image (the image is then interpolated at their voxels).
 void takePreoperativeImage(TissueClassificationParameters& parameters, const ScalarImage& preopImage,
                            const LabelImage& preopLabels, const SpatialTransform& intraopToPreop);
 
