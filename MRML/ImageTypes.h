@@ -12,6 +12,8 @@ constexpr unsigned int Dimension = 3;
 using ScalarImage = itk::Image<float, Dimension>;
 using LabelPixel = unsigned short;
 using LabelImage = itk::Image<LabelPixel, Dimension>;
+/// A binary mask: 1 in, 0 out.
+using MaskImage = itk::Image<unsigned char, Dimension>;
 /// A displacement field in LPS mm: the mapping x = y + d(y).
 using DisplacementVector = itk::Vector<float, Dimension>;
 using DisplacementFieldImage = itk::Image<DisplacementVector, Dimension>;

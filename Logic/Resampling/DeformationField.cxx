@@ -12,6 +12,7 @@
 #include ITK_EIGEN(Dense)
 
 #include <vtkCellArray.h>
+#include <vtkCellData.h>
 #include <vtkDataArray.h>
 #include <vtkIdList.h>
 #include <vtkPointData.h>
@@ -131,30 +132,20 @@ MeshNodes meshNodesOf(vtkUnstructuredGrid* mesh, vtkDataArray* displacement, con
   return result;
 }
 
-/// Gives each voxel of the deformed tetrahedron `v` (not yet located) its correction, from the
-/// barycentric coordinates of its index in the deformed tetrahedron. Index space is an affine image
-/// of the model frame, so barycentric coordinates carry over.
-void rasteriseDeformedTetrahedron(const vtkIdType v[4], const MeshNodes& nodes, vtkDataArray* displacement,
-                                  const VoxelLattice& lattice, VoxelCorrection& out)
+/// Calls visit(offset, lambda) for each voxel of the lattice whose centre the tetrahedron with
+/// corners `q` (index space) holds and `skip(offset)` does not refuse, lambda its barycentric
+/// coordinates there (of q[0] first). Nothing for a degenerate tetrahedron.
+template <class Skip, class Visit>
+void forEachVoxelInTetrahedron(const std::array<Vec, 4>& q, const VoxelLattice& lattice, Skip&& skip, Visit&& visit)
 {
-  const Vec& q0 = nodes.deformedIndex[std::size_t(v[0])];
   Mat edges;
-  edges.col(0) = nodes.deformedIndex[std::size_t(v[1])] - q0;
-  edges.col(1) = nodes.deformedIndex[std::size_t(v[2])] - q0;
-  edges.col(2) = nodes.deformedIndex[std::size_t(v[3])] - q0;
-  const double det = edges.determinant();
-  const Mat undeformedEdges = [&] {
-    Mat m;
-    for (int k = 0; k < 3; ++k) m.col(k) = nodes.undeformed[std::size_t(v[k + 1])] - nodes.undeformed[std::size_t(v[0])];
-    return m;
-  }();
-  if (det * undeformedEdges.determinant() <= 0) ++out.invertedDeformedTetrahedra;
-  if (std::abs(det) < 1e-12) return;
+  for (int k = 0; k < 3; ++k) edges.col(k) = q[std::size_t(k + 1)] - q[0];
+  if (std::abs(edges.determinant()) < 1e-12) return;
   const Mat inverse = edges.inverse();
-  Vec lo = q0, hi = q0;
-  for (int k = 1; k < 4; ++k) {
-    lo = lo.cwiseMin(nodes.deformedIndex[std::size_t(v[k])]);
-    hi = hi.cwiseMax(nodes.deformedIndex[std::size_t(v[k])]);
+  Vec lo = q[0], hi = q[0];
+  for (std::size_t k = 1; k < 4; ++k) {
+    lo = lo.cwiseMin(q[k]);
+    hi = hi.cwiseMax(q[k]);
   }
   const long i0 = std::max(0L, long(std::ceil(lo[0]))), i1 = std::min(lattice.nx - 1, long(std::floor(hi[0])));
   const long j0 = std::max(0L, long(std::ceil(lo[1]))), j1 = std::min(lattice.ny - 1, long(std::floor(hi[1])));
@@ -163,23 +154,46 @@ void rasteriseDeformedTetrahedron(const vtkIdType v[4], const MeshNodes& nodes, 
     for (long j = j0; j <= j1; ++j) {
       for (long i = i0; i <= i1; ++i) {
         const std::size_t at = lattice.offset(i, j, k);
-        if (out.located[at]) continue;
-        const Vec lambda = inverse * (Vec(double(i), double(j), double(k)) - q0);
+        if (skip(at)) continue;
+        const Vec lambda = inverse * (Vec(double(i), double(j), double(k)) - q[0]);
         const double lambda0 = 1.0 - lambda.sum();
         const double eps = -1e-9;
         if (lambda[0] < eps || lambda[1] < eps || lambda[2] < eps || lambda0 < eps) continue;
-        out.located[at] = 1;
-        // X - p = -(sum lambda_k u_k): the preoperative point minus the deformed one.
-        Vec u0, u1, u2, u3;
-        displacement->GetTuple(v[0], u0.data());
-        displacement->GetTuple(v[1], u1.data());
-        displacement->GetTuple(v[2], u2.data());
-        displacement->GetTuple(v[3], u3.data());
-        const Vec w = -(lambda0 * u0 + lambda[0] * u1 + lambda[1] * u2 + lambda[2] * u3);
-        for (int d = 0; d < 3; ++d) out.w[3 * at + std::size_t(d)] = float(w[d]);
+        visit(at, std::array<double, 4>{lambda0, lambda[0], lambda[1], lambda[2]});
       }
     }
   }
+}
+
+std::array<Vec, 4> deformedCorners(const vtkIdType v[4], const MeshNodes& nodes)
+{
+  return {nodes.deformedIndex[std::size_t(v[0])], nodes.deformedIndex[std::size_t(v[1])], nodes.deformedIndex[std::size_t(v[2])],
+          nodes.deformedIndex[std::size_t(v[3])]};
+}
+
+/// Gives each voxel of the deformed tetrahedron `v` (not yet located) its correction, from the
+/// barycentric coordinates of its index in the deformed tetrahedron. Index space is an affine image
+/// of the model frame, so barycentric coordinates carry over.
+void rasteriseDeformedTetrahedron(const vtkIdType v[4], const MeshNodes& nodes, vtkDataArray* displacement,
+                                  const VoxelLattice& lattice, VoxelCorrection& out)
+{
+  const std::array<Vec, 4> q = deformedCorners(v, nodes);
+  Mat edges, undeformedEdges;
+  for (int k = 0; k < 3; ++k) {
+    edges.col(k) = q[std::size_t(k + 1)] - q[0];
+    undeformedEdges.col(k) = nodes.undeformed[std::size_t(v[k + 1])] - nodes.undeformed[std::size_t(v[0])];
+  }
+  if (edges.determinant() * undeformedEdges.determinant() <= 0) ++out.invertedDeformedTetrahedra;
+  std::array<Vec, 4> u;
+  for (std::size_t k = 0; k < 4; ++k) displacement->GetTuple(v[k], u[k].data());
+  forEachVoxelInTetrahedron(
+    q, lattice, [&](std::size_t at) { return out.located[at] != 0; },
+    [&](std::size_t at, const std::array<double, 4>& lambda) {
+      out.located[at] = 1;
+      // X - p = -(sum lambda_k u_k): the preoperative point minus the deformed one.
+      const Vec w = -(lambda[0] * u[0] + lambda[1] * u[1] + lambda[2] * u[2] + lambda[3] * u[3]);
+      for (int d = 0; d < 3; ++d) out.w[3 * at + std::size_t(d)] = float(w[d]);
+    });
 }
 
 /// Locates every voxel's model-frame point in the deformed mesh by rasterising each deformed
@@ -552,6 +566,35 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
   measureFolding(maps, grid, correction.located, result);
   result.jacobianSeconds = secondsSince(jacobianStart);
   return result;
+}
+
+MaskImage::Pointer voxelsOfDeformedTissue(vtkUnstructuredGrid* mesh, LabelPixel label, const SpatialTransform& rigidIntraopToPreop,
+                                          const ImageGeometry& grid, const std::string& meshName)
+{
+  vtkDataArray* displacement = mesh->GetPointData()->GetArray("Displacement");
+  if (!displacement || displacement->GetNumberOfComponents() != 3) {
+    throw InputError(meshName + ": no point array \"Displacement\"; run `brainshift simulate` on this output folder first");
+  }
+  vtkDataArray* labels = mesh->GetCellData()->GetArray("Label");
+  if (!labels) throw InputError(meshName + ": no cell array \"Label\"");
+  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError("the rigid transform is not linear");
+  const GridMaps maps = gridMapsOf(rigidIntraopToPreop, grid);
+  const VoxelLattice lattice(grid);
+  const MeshNodes nodes = meshNodesOf(mesh, displacement, maps, meshName);
+  MaskImage::Pointer mask = grid.allocate<MaskImage>();
+  unsigned char* m = mask->GetBufferPointer();
+  std::fill_n(m, grid.numberOfVoxels(), 0);
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    if (std::lround(labels->GetComponent(c, 0)) != long(label)) continue;
+    mesh->GetCellPoints(c, ids);
+    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
+    const vtkIdType v[4] = {ids->GetId(0), ids->GetId(1), ids->GetId(2), ids->GetId(3)};
+    forEachVoxelInTetrahedron(
+      deformedCorners(v, nodes), lattice, [&](std::size_t at) { return m[at] != 0; },
+      [&](std::size_t at, const std::array<double, 4>&) { m[at] = 1; });
+  }
+  return mask;
 }
 
 DisplacementFieldImage::Pointer linearTransformField(const SpatialTransform& transform, const ImageGeometry& grid)

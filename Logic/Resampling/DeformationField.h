@@ -59,6 +59,13 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
                                      const ImageGeometry& intraopGrid, const DeformationFieldParameters& parameters,
                                      const std::string& meshName = "the mesh");
 
+/// The voxels of `grid` where the solve put the tissue `label` of the mesh (cell array "Label"):
+/// those whose point R(y) lies in one of its deformed tetrahedra (1; else 0). Rasterised
+/// tetrahedron by tetrahedron: its cost follows the tissue, not the grid. InputError naming
+/// `meshName` when the mesh has no displacement or labels.
+MaskImage::Pointer voxelsOfDeformedTissue(vtkUnstructuredGrid* mesh, LabelPixel label, const SpatialTransform& rigidIntraopToPreop,
+                                          const ImageGeometry& grid, const std::string& meshName = "the mesh");
+
 /// A linear transform alone as a field on `grid`: x = T(y) = y + d(y) (the rigid result in the
 /// form of the update's field, e.g. when the non-rigid part is set aside). InputError when the
 /// transform is not linear.

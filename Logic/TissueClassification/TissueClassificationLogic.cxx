@@ -195,7 +195,7 @@ std::vector<TissueDistance> tissueDistances(const LabelImage& labels, const std:
 }
 
 /// The intensity as one channel: 0 to 100 between the 1st and 99th percentile of the head.
-std::vector<float> normalizedIntensity(const ScalarImage& image, const std::vector<unsigned char>& head)
+std::vector<float> normalizedIntensity(const ScalarImage& image, const std::vector<unsigned char>& head, IntensityScale& scale)
 {
   const float* v = image.GetBufferPointer();
   const std::size_t n = image.GetLargestPossibleRegion().GetNumberOfPixels();
@@ -210,10 +210,10 @@ std::vector<float> normalizedIntensity(const ScalarImage& image, const std::vect
     std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(at), values.end());
     return values[at];
   };
-  const double lo = percentile(0.01), hi = percentile(0.99);
+  scale.low = percentile(0.01);
+  scale.high = percentile(0.99);
   std::vector<float> normalized(n);
-  const double scale = hi > lo ? 100.0 / (hi - lo) : 1.0;
-  for (std::size_t i = 0; i < n; ++i) normalized[i] = float((v[i] - lo) * scale);
+  for (std::size_t i = 0; i < n; ++i) normalized[i] = scale.of(v[i]);
   return normalized;
 }
 
@@ -383,29 +383,30 @@ itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySi
   return relabel->GetOutput();
 }
 
-/// The tumour's prototypes' intensity against the ventricles' (fluid), the background's (air) and
-/// the parenchyma's, as this scan shows them (ScanContrast): a cavity holds fluid and air, whatever
-/// their order in this contrast.
-TumourResectionEvidence tumourResectionEvidence(std::map<LabelPixel, std::vector<float>>& prototypeIntensity,
-                                                const ScanContrast& contrast, const TissueClassificationParameters& P)
+} // namespace
+
+/// Each of the tumour's intensities votes for what it looks like most: fluid, the tumour as it
+/// looked before surgery (its place between fluid and parenchyma then; without it, the
+/// parenchyma), or the parenchyma (tissue the rigid prior misplaced: no vote on the tumour). A
+/// cavity holds fluid and air, whatever their order in this contrast (ScanContrast).
+TumourResectionEvidence tumourResectionEvidenceOf(const std::vector<float>& tumourIntensities, const ScanContrast& contrast,
+                                                  double preopRelative, TumourResection told)
 {
   TumourResectionEvidence e;
-  e.tumourMedian = median(prototypeIntensity[Tumour]);
+  e.tumourMedian = median(tumourIntensities);
   e.parenchymaMedian = contrast.parenchyma;
   e.fluidMedian = contrast.fluid;
   e.airMedian = contrast.air;
   const double span = e.parenchymaMedian - e.fluidMedian;
   e.intraopRelative = std::abs(span) > 1e-6 ? (e.tumourMedian - e.fluidMedian) / span : std::nan("");
-  e.preopRelative = P.preopTumourContrast;
-  e.decidedBy = P.tumourResection == TumourResection::Auto ? "image" : "user";
-  // Each tumour prototype votes for what it looks like most: fluid, the tumour as it looked before
-  // surgery (its place between fluid and parenchyma then; without it, the parenchyma), or the
-  // parenchyma (tissue the rigid prior misplaced: no vote on the tumour).
+  e.preopRelative = preopRelative;
+  e.decidedBy = told == TumourResection::Auto ? "image" : "user";
+  e.voxels = tumourIntensities.size();
   if (std::isfinite(span) && std::abs(span) > 1e-6) {
     const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
     const double expected = e.fluidMedian + before * span;
     std::size_t fluid = 0, air = 0, tumour = 0, parenchyma = 0;
-    for (float v : prototypeIntensity[Tumour]) {
+    for (float v : tumourIntensities) {
       // Air counts with the fluid (the cavity's upper part); in T1 it is nearer the fluid anyway.
       const double toLiquid = std::abs(v - e.fluidMedian);
       const double toAir = std::isfinite(e.airMedian) ? std::abs(v - e.airMedian) : std::numeric_limits<double>::infinity();
@@ -454,6 +455,13 @@ bool decideTumourResection(const TumourResectionEvidence& e, TumourResection tol
   return e.fluidLikeShare > e.tumourLikeShare;
 }
 
+bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved)
+{
+  constexpr double cavityAirShare = 0.05;
+  return decideTumourResection(whereSolved, TumourResection::Auto) && whereSolved.airLikeShare >= cavityAirShare;
+}
+
+namespace {
 /// A voxel nearer this scan's fluid or air than the tumour's own look before surgery (mapped onto
 /// this scan's fluid and parenchyma), as the resection vote counts it. Never where that look does
 /// not carry over (fluid brighter than the parenchyma: T2) or where the tumour looked like fluid
@@ -635,6 +643,7 @@ struct ClassificationWork {
   std::vector<float> signedDistances; ///< N x T, saturated at P.saturationMm
   std::vector<unsigned char> head;    ///< not background in the aligned labels
   std::vector<float> intensity;       ///< 0-100 over the head
+  IntensityScale intensityScale;      ///< of `intensity`
   std::vector<float> features;        ///< N x D
   std::vector<std::size_t> prototypeVoxels;
   std::vector<LabelPixel> prototypeLabels;
@@ -709,7 +718,7 @@ void computeFeatures(ClassificationWork& w)
     corrected = biasCorrected(w.intraop, w.head);
     source = corrected;
   }
-  w.intensity = normalizedIntensity(*source, w.head);
+  w.intensity = normalizedIntensity(*source, w.head, w.intensityScale);
   const std::size_t T = w.T, D = w.D;
   w.features.assign(w.N * D, 0.0f);
   parallelRanges(w.N, [&](std::size_t begin, std::size_t end, unsigned) {
@@ -838,7 +847,7 @@ PrototypeCloud learnFromPrototypes(const ClassificationWork& w, TissueClassifica
   result.contrast = scanContrastOf(prototypeIntensity);
   if (!w.maps->present.count(Ventricles)) result.contrast.fluid = std::nan("");
   if (w.maps->present.count(Tumour)) {
-    result.tumourEvidence = tumourResectionEvidence(prototypeIntensity, result.contrast, w.P);
+    result.tumourEvidence = tumourResectionEvidenceOf(prototypeIntensity[Tumour], result.contrast, w.P.preopTumourContrast, w.P.tumourResection);
     result.tumourResected = decideTumourResection(result.tumourEvidence, w.P.tumourResection);
   }
   PrototypeCloud cloud;
@@ -1187,6 +1196,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   result.voxels = work.N;
   sampleAlignedDistances(work, rigid);
   computeFeatures(work);
+  result.intensityScale = work.intensityScale;
   if (given) {
     takeGivenPrototypes(work, *given, result);
   } else {

@@ -73,6 +73,7 @@ struct TumourResectionEvidence {
   double intraopRelative = 0, preopRelative = 0;
   double fluidLikeShare = 0, tumourLikeShare = 0, parenchymaLikeShare = 0;
   double airLikeShare = 0; ///< of the fluid-like share, those nearer the air than the fluid
+  std::size_t voxels = 0; ///< the intensities that voted (the tumour's prototypes, or its voxels)
   std::string decidedBy; ///< "image" or "user"; empty without a tumour
 };
 
@@ -90,6 +91,30 @@ struct ScanContrast {
 };
 /// The medians of the prototypes' intensities per label (0 background, 2 parenchyma, 3 ventricles).
 ScanContrast scanContrastOf(const std::map<LabelPixel, std::vector<float>>& prototypeIntensity);
+
+/// The tumour's evidence from its intraoperative intensities (0-100 scale): each votes for fluid
+/// (or air), the tumour as it looked before surgery (`preopRelative`: its place between fluid (0)
+/// and parenchyma (1) then; NaN: the parenchyma), or the parenchyma.
+TumourResectionEvidence tumourResectionEvidenceOf(const std::vector<float>& tumourIntensities, const ScanContrast& contrast,
+                                                  double preopRelative, TumourResection told);
+/// Resected or not, as the evidence says (or as `told`, when not Auto).
+bool decideTumourResection(const TumourResectionEvidence& evidence, TumourResection told);
+/// The evidence of the tumour's voxels where a solve put it, after a first classification found
+/// the tumour in place through the rigid prior. Under a large shift that prior's tumour site holds
+/// the parenchyma that sank into it; where the solve put the tumour, a cavity shows. Resected when
+/// the vote says so and air shows in it: a cavity under an open craniotomy holds air at its top,
+/// no tumour does, while a necrotic or cystic tumour's core looks like fluid (measured on the
+/// built-in scenarios: 10-36 % air where the tumour was resected, at most 4 % where it was not,
+/// and 30-54 % fluid-like in tumours left in place). A cavity filled with saline alone is not told
+/// from a cystic tumour: it stays in place unless the user says otherwise.
+bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved);
+
+/// The intensity channel's 0-100 scale: 0 and 100 are these values of the intraoperative image
+/// (its 1st and 99th percentiles over the head).
+struct IntensityScale {
+  double low = 0, high = 100;
+  float of(double value) const { return float((value - low) * (high > low ? 100.0 / (high - low) : 1.0)); }
+};
 
 struct TissueClassificationParameters {
   /// Polled between the phases and every 65,536 voxels of the k-NN: CancelledError when set.
@@ -150,6 +175,7 @@ struct TissueClassificationResult {
   bool tumourResected = false;               ///< the tumour's prototypes look like fluid (or the user said so)
   TumourResectionEvidence tumourEvidence;
   ScanContrast contrast;                     ///< what the prototypes learned of this scan's contrast
+  IntensityScale intensityScale;             ///< of the intensity channel (after N4 when asked)
   double featureSeconds = 0, knnSeconds = 0, cleanupSeconds = 0;
   std::size_t voxels = 0;
   std::size_t knnQueries = 0;                ///< voxels that needed a tree query (the rest shared an answer)

@@ -19,6 +19,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 
 namespace brainshift {
@@ -167,17 +168,28 @@ void requireEarlierStages(RunContext& context)
 /// entries each pass rewrites.
 struct FirstPass {
   LabelImage::Pointer anchor;
-  std::optional<bool> tumourResected;
+  std::optional<RunContext::HeldTumourDecision> tumourDecision;
   nlohmann::json surface, simulate;
 
   explicit FirstPass(RunContext& context)
   {
-    anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
     auto stage = [&](const char* name) { return context.report().hasStage(name) ? context.report().stage(name) : nlohmann::json::object(); };
     surface = stage("surface");
     simulate = stage("simulate");
-    const nlohmann::json classify = stage("classify");
-    if (classify.contains("tumour_resected") && classify["tumour_resected"].is_boolean()) tumourResected = classify["tumour_resected"].get<bool>();
+    takeClassification(context);
+  }
+  /// The classification the passes keep: the first's, or the tumour decision pass's.
+  void takeClassification(RunContext& context)
+  {
+    anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
+    const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+    tumourDecision.reset();
+    if (classify.contains("tumour_resected") && classify["tumour_resected"].is_boolean()) {
+      const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
+      const std::string by = evidence.is_object() ? evidence.value("decided_by", std::string()) : std::string();
+      tumourDecision = RunContext::HeldTumourDecision{classify["tumour_resected"].get<bool>(),
+                                                      by == "image" ? "the first classification (through the rigid prior)" : by};
+    }
   }
   void restateIn(RunReport& report) const
   {
@@ -206,7 +218,8 @@ PassOutcome runRefinePass(RunContext& context, unsigned pass, const FirstPass& f
   const double reachMm = context.configuration().classificationRefinementReachMm;
   const auto before = imposedDisplacements(context, context.output("brain_surface.vtp"));
   const WarpedPrior prior = labelsWarpedBySolve(context, reachMm);
-  context.setWarpedPrior(prior.labels, int(pass), reachMm > 0 ? prior.moved : nullptr, first.anchor, first.tumourResected);
+  context.setWarpedPrior(prior.labels, int(pass), reachMm > 0 ? prior.moved : nullptr, first.anchor);
+  context.holdTumourDecision(first.tumourDecision);
   const double priorSeconds = passClock.seconds();
   runClassifyStage(context);
   runSurfaceStage(context);
@@ -233,6 +246,94 @@ PassOutcome runRefinePass(RunContext& context, unsigned pass, const FirstPass& f
   return outcome;
 }
 
+/// Where the first solve put the tumour, when the first classification found it in place by the
+/// image: its voxels' intensities on the classification's scale, voting as its prototypes did.
+struct TumourWhereSolved {
+  nlohmann::json entry = nullptr; ///< null: not looked at (no tumour, told, or resected already)
+  bool resected = false;
+};
+
+double numberOr(const nlohmann::json& object, const char* key, double otherwise)
+{
+  return object.is_object() && object.contains(key) && object[key].is_number() ? object[key].get<double>() : otherwise;
+}
+
+TumourWhereSolved checkTumourWhereSolved(RunContext& context)
+{
+  Stopwatch clock;
+  TumourWhereSolved check;
+  const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+  const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
+  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || classify.value("tumour_resected", true)) return check;
+  auto notChecked = [&](const std::string& why) {
+    check.entry = {{"checked", false}, {"why_not", why}};
+    return check;
+  };
+  if (context.configuration().classificationBiasCorrection) {
+    return notChecked("the classification's intensities were bias-corrected (N4): the scan itself is on another scale");
+  }
+  const nlohmann::json contrastEntry = classify.value("contrast", nlohmann::json::object());
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const IntensityScale scale{numberOr(contrastEntry, "scale_low", nan), numberOr(contrastEntry, "scale_high", nan)};
+  if (!std::isfinite(scale.low) || !std::isfinite(scale.high)) return notChecked("the classification's report gives no intensity scale");
+  ScanContrast contrast;
+  contrast.air = numberOr(contrastEntry, "air_median", nan);
+  contrast.fluid = numberOr(contrastEntry, "fluid_median", nan);
+  contrast.parenchyma = numberOr(contrastEntry, "parenchyma_median", nan);
+  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
+  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
+  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
+  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  const ScalarImage& intraop = context.intraopImage("refine");
+  constexpr LabelPixel tumourLabel = 4; // ../shared/CONTRACT.md
+  const MaskImage::Pointer where = voxelsOfDeformedTissue(mesh, tumourLabel, *rigid, ImageGeometry::of(&intraop), meshFile.string());
+  std::vector<float> intensities;
+  const unsigned char* m = where->GetBufferPointer();
+  const float* v = intraop.GetBufferPointer();
+  for (std::size_t i = 0, n = ImageGeometry::of(&intraop).numberOfVoxels(); i < n; ++i) {
+    if (m[i]) intensities.push_back(scale.of(v[i]));
+  }
+  constexpr std::size_t fewestVoxels = 20;
+  if (intensities.size() < fewestVoxels) return notChecked("the tumour lies outside the scan where the solve put it");
+  const TumourResectionEvidence whereSolved =
+    tumourResectionEvidenceOf(intensities, contrast, numberOr(evidence, "preop_relative", nan), TumourResection::Auto);
+  check.resected = resectionShownWhereSolved(whereSolved);
+  check.entry = {{"checked", true}, {"resected", check.resected}, {"evidence", tumourEvidenceJson(whereSolved)}, {"seconds", clock.seconds()}};
+  char line[400];
+  if (check.resected) {
+    std::snprintf(line, sizeof(line), "refine: where the first solve put the tumour, %.0f %% of it looks like fluid or air (%.0f %% like air): "
+                  "resected, not in place as its place through the rigid prior said; classified again\n",
+                  100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
+    context.say("%s", line);
+  } else if (decideTumourResection(whereSolved, TumourResection::Auto)) {
+    std::snprintf(line, sizeof(line), "refine: the tumour's resection is uncertain: where the first solve put it, %.0f %% of it looks like "
+                  "fluid but %.0f %% like air, as a cystic or necrotic tumour in place would; kept in place "
+                  "(--tumour-resected yes if it was resected)", 100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
+    context.report().addWarning(line);
+  }
+  return check;
+}
+
+/// The scan classified again with the tumour decided where the first solve put it, and the
+/// surface fitted and solved again on it.
+void runTumourDecisionPass(RunContext& context, bool resected)
+{
+  context.holdTumourDecision(RunContext::HeldTumourDecision{resected, "the tumour where the first solve put it"});
+  context.setRepeatPass(true);
+  try {
+    runClassifyStage(context);
+    runSurfaceStage(context);
+    runSimulateStage(context);
+  } catch (...) {
+    context.holdTumourDecision(std::nullopt);
+    context.setRepeatPass(false);
+    throw;
+  }
+  context.holdTumourDecision(std::nullopt);
+  context.setRepeatPass(false);
+}
+
 } // namespace
 
 void runRefineStage(RunContext& context)
@@ -244,7 +345,17 @@ void runRefineStage(RunContext& context)
   bool settled = false;
   std::size_t disagreementNodes = 0; // the last pass's, in the confidence map
   requireEarlierStages(context);
-  const FirstPass first(context);
+  FirstPass first(context);
+  const TumourWhereSolved tumour = checkTumourWhereSolved(context);
+  nlohmann::json tumourEntry = tumour.entry;
+  if (tumour.resected) {
+    Stopwatch decisionClock;
+    runTumourDecisionPass(context, true);
+    first.restateIn(context.report());
+    first.takeClassification(context);
+    tumourEntry["decision_pass_seconds"] = decisionClock.seconds();
+    context.report().save();
+  }
   try {
     for (unsigned pass = 1; pass <= maximumPasses && !settled; ++pass) {
       const PassOutcome outcome = runRefinePass(context, pass, first);
@@ -255,9 +366,11 @@ void runRefineStage(RunContext& context)
     }
   } catch (...) {
     context.setWarpedPrior(nullptr, 0);
+    context.holdTumourDecision(std::nullopt);
     throw;
   }
   context.setWarpedPrior(nullptr, 0);
+  context.holdTumourDecision(std::nullopt);
   context.report().setStage("refine", {{"wall_seconds", clock.seconds()},
                                        {"passes", passes.size()},
                                        {"maximum_passes", maximumPasses},
@@ -265,6 +378,7 @@ void runRefineStage(RunContext& context)
                                        {"uncertainty_disagreement_nodes", disagreementNodes},
                                        {"tolerance_mm", tolerance},
                                        {"settled", settled || maximumPasses == 0},
+                                       {"tumour_where_solved", tumourEntry},
                                        {"per_pass", passes}});
   if (!settled && maximumPasses > 0) {
     char warning[160];

@@ -115,7 +115,6 @@ void runRigidStage(RunContext& context)
 
 namespace brainshift {
 
-namespace {
 nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
 {
   if (e.decidedBy.empty()) return nullptr;
@@ -130,8 +129,11 @@ nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& e)
           {"fluid_like_share", e.fluidLikeShare},
           {"air_like_share", e.airLikeShare},
           {"tumour_like_share", e.tumourLikeShare},
-          {"parenchyma_like_share", e.parenchymaLikeShare}};
+          {"parenchyma_like_share", e.parenchymaLikeShare},
+          {"voxels", e.voxels}};
 }
+
+namespace {
 
 /// A partial field of view (a slab around the craniotomy) may miss a whole tissue, e.g. the
 /// ventricles under a superficial craniotomy: no prototypes of it could be chosen. The tissues
@@ -200,14 +202,34 @@ TissueClassificationResult classifyWithPrior(RunContext& context, const SpatialT
   return classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), rigid, prototypes, parameters);
 }
 
-/// What the prototypes learned of this scan's contrast (0-100 scale), and its fluid's side.
-nlohmann::json scanContrastJson(const ScanContrast& c)
+/// What the prototypes learned of this scan's contrast (0-100 scale), its fluid's side, and the
+/// scale (the intraoperative values at 0 and 100).
+nlohmann::json scanContrastJson(const ScanContrast& c, const IntensityScale& scale)
 {
   auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return {{"air_median", finite(c.air)},
           {"fluid_median", finite(c.fluid)},
           {"parenchyma_median", finite(c.parenchyma)},
-          {"fluid", c.fluidBrighterThanParenchyma() ? "brighter than the parenchyma" : "darker than the parenchyma"}};
+          {"fluid", c.fluidBrighterThanParenchyma() ? "brighter than the parenchyma" : "darker than the parenchyma"},
+          {"scale_low", scale.low},
+          {"scale_high", scale.high}};
+}
+
+/// The tumour decision the classification takes instead of its own, when it would decide by the
+/// image: the refine stage's (held in the context), else a resection an earlier scan of this case
+/// found (a tumour resected stays resected; its cavity at a later, larger shift may sit where
+/// tissue sank, the decision's blind spot through the rigid prior).
+std::optional<RunContext::HeldTumourDecision> tumourDecisionToHold(const RunContext& context, const TissueClassificationParameters& parameters)
+{
+  if (parameters.tumourResection != TumourResection::Auto) return std::nullopt;
+  if (context.heldTumourDecision()) return context.heldTumourDecision();
+  const nlohmann::json& previous = context.previousReport();
+  const nlohmann::json* classify = previous.contains("stages") && previous["stages"].contains("classify") ? &previous["stages"]["classify"] : nullptr;
+  if (classify && classify->is_object() && classify->contains("tumour_resected") && (*classify)["tumour_resected"].is_boolean() &&
+      (*classify)["tumour_resected"].get<bool>()) {
+    return RunContext::HeldTumourDecision{true, "an earlier scan of this case (resected there)"};
+  }
+  return std::nullopt;
 }
 } // namespace
 
@@ -246,12 +268,11 @@ void runClassifyStage(RunContext& context)
     takePreoperativeImage(parameters, context.preopImage("classify"), context.preopLabels("classify"), *rigid);
   }
   const LabelImage* prior = context.warpedPrior();
-  // refine: the first classification's tumour decision stands (unless the user gave one).
-  const bool decisionKept = prior && context.firstTumourDecision() && parameters.tumourResection == TumourResection::Auto;
-  if (decisionKept) parameters.tumourResection = *context.firstTumourDecision() ? TumourResection::Resected : TumourResection::InPlace;
+  const std::optional<RunContext::HeldTumourDecision> held = tumourDecisionToHold(context, parameters);
+  if (held) parameters.tumourResection = held->resected ? TumourResection::Resected : TumourResection::InPlace;
   const TissueClassificationResult result = classifyWithPrior(context, *rigid, prototypes, parameters);
   nlohmann::json tumourEvidence = tumourEvidenceJson(result.tumourEvidence);
-  if (decisionKept) tumourEvidence["decided_by"] = "the first classification (through the rigid prior)";
+  if (held && !tumourEvidence.is_null()) tumourEvidence["decided_by"] = held->decidedBy;
   // refine: the first classification stays where the solve moved nothing.
   const std::size_t relabelled = prior && context.movedByPrior() && context.anchorLabels()
                                    ? keepAnchorOutside(*result.labels, *context.anchorLabels(), *context.movedByPrior())
@@ -275,7 +296,7 @@ void runClassifyStage(RunContext& context)
                                          {"k", parameters.k},
                                          {"tumour_resected", result.tumourResected},
                                          {"tumour_evidence", tumourEvidence},
-                                         {"contrast", scanContrastJson(result.contrast)},
+                                         {"contrast", scanContrastJson(result.contrast, result.intensityScale)},
                                          {"relabelled_where_moved", relabelled},
                                          {"fluid_joined_to_gaps_ml", result.fluidJoinedToGapsMl},
                                          {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
@@ -646,7 +667,7 @@ void runSurfaceStage(RunContext& context)
   // A later scan on the same mesh reuses the preoperative boundary the previous scan found.
   vtkSmartPointer<vtkPolyData> previousSurface;
   std::optional<fs::path> previousSurfaceFile = context.previousFile("brain_surface.vtp");
-  const bool samePass = context.warpedPrior() != nullptr; // refine: this scan's own surface, same mesh
+  const bool samePass = context.repeatPass(); // refine: this scan's own surface, same mesh
   if (samePass) previousSurfaceFile = context.output("brain_surface.vtp");
   if (previousSurfaceFile && (samePass || (context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")))) {
     previousSurface = vtkPolyData::SafeDownCast(context.products().readModel(*previousSurfaceFile));

@@ -130,18 +130,27 @@ public:
   /// classification replace `anchor`, the classification through the rigid prior (elsewhere the two
   /// priors agree, and an ambiguous boundary left to the prior alone would follow the last pass's
   /// own error from pass to pass).
-  /// `tumourResected`: the first classification's decision, which a refine pass keeps (the warped
-  /// prior carries the first solve's errors into the place where the tumour is looked at).
-  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr,
-                      std::optional<bool> tumourResected = std::nullopt)
+  void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr)
   {
     warpedPrior_ = std::move(labels);
     warpedPriorPass_ = pass;
     movedByPrior_ = std::move(moved);
     anchorLabels_ = std::move(anchor);
-    firstTumourDecision_ = tumourResected;
   }
-  std::optional<bool> firstTumourDecision() const { return firstTumourDecision_; }
+  /// A decision on the tumour that the classification takes instead of its own (unless the user
+  /// gave one), and who made it: the refine stage's (where the first solve put the tumour; or the
+  /// first classification's, which a refine pass keeps: the warped prior carries the first solve's
+  /// errors into the place where the tumour is looked at). Cleared with std::nullopt.
+  struct HeldTumourDecision {
+    bool resected = false;
+    std::string decidedBy;
+  };
+  void holdTumourDecision(std::optional<HeldTumourDecision> decision) { heldTumourDecision_ = std::move(decision); }
+  const std::optional<HeldTumourDecision>& heldTumourDecision() const { return heldTumourDecision_; }
+  /// Another pass over this scan (the refine stage's): the surface stage starts from the
+  /// preoperative boundary this scan's own surface holds.
+  void setRepeatPass(bool repeat) { repeatPass_ = repeat; }
+  bool repeatPass() const { return repeatPass_ || warpedPrior_; }
   /// The evidence behind the last solve of this run (its imposed nodes and matches, with their
   /// misfits): the confidence map's, which the refine stage adds its passes' disagreement to.
   void setSolveEvidence(DisplacementEvidence evidence) { solveEvidence_ = std::move(evidence); }
@@ -168,7 +177,8 @@ private:
   int warpedPriorPass_ = 0;
   MaskImage::Pointer movedByPrior_;
   LabelImage::Pointer anchorLabels_;
-  std::optional<bool> firstTumourDecision_;
+  std::optional<HeldTumourDecision> heldTumourDecision_;
+  bool repeatPass_ = false;
   StageProducts products_;
   std::optional<DisplacementEvidence> solveEvidence_;
 };
@@ -232,6 +242,8 @@ void runMeshStage(RunContext& context);
 void runSurfaceStage(RunContext& context);
 void runWarpStage(RunContext& context);
 void runRefineStage(RunContext& context); ///< RefineStage.cxx
+/// The tumour's evidence as report.json keeps it (null without a tumour).
+nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& evidence);
 
 /// Before surgery, into the context's output folder, from the preoperative data alone: the mesh
 /// (mesh.vtu), the preoperative brain surface with each node's preoperative boundary

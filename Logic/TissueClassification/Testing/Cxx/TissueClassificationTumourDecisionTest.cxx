@@ -31,6 +31,30 @@ int TissueClassificationTumourDecisionTest(int, char*[])
   return brainshift::testing::runTest("TissueClassificationTumourDecisionTest", [] {
     using namespace brainshift;
     BS_CHECK(toString(tumourResectionFromString("yes")) == "yes");
+    // Where a solve put the tumour (a scan of fluid 20, parenchyma 70, air 2 on the 0-100 scale; a
+    // tumour that looked like the parenchyma before surgery): resected when the vote says so and air
+    // shows in it. A necrotic tumour's fluid-like core alone, or a cavity of saline alone, is not
+    // enough: the two cannot be told apart by intensity.
+    const ScanContrast scan{2.0, 20.0, 70.0};
+    auto voxels = [](std::initializer_list<std::pair<float, std::size_t>> parts) {
+      std::vector<float> v;
+      for (const auto& [value, count] : parts) v.insert(v.end(), count, value);
+      return v;
+    };
+    const TumourResectionEvidence cavity = tumourResectionEvidenceOf(voxels({{2.0f, 30}, {21.0f, 20}, {69.0f, 50}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK_MSG(std::abs(cavity.fluidLikeShare - 0.5) < 1e-9 && std::abs(cavity.airLikeShare - 0.3) < 1e-9, cavity.fluidLikeShare);
+    BS_CHECK(cavity.voxels == 100);
+    BS_CHECK(resectionShownWhereSolved(cavity));
+    const TumourResectionEvidence necrotic = tumourResectionEvidenceOf(voxels({{22.0f, 40}, {70.0f, 60}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK(decideTumourResection(necrotic, TumourResection::Auto)); // the vote alone would say resected
+    BS_CHECK(!resectionShownWhereSolved(necrotic));
+    BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{20.0f, 100}}), scan, 1.0, TumourResection::Auto)));
+    BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{68.0f, 97}, {2.0f, 3}}), scan, 1.0, TumourResection::Auto)));
+    // A hypointense tumour (0.4 of the way to the parenchyma) in place, with a little air beside it.
+    const TumourResectionEvidence hypointense =
+      tumourResectionEvidenceOf(voxels({{40.0f, 90}, {2.0f, 10}}), scan, 0.4, TumourResection::Auto);
+    BS_CHECK_MSG(std::abs(hypointense.tumourLikeShare - 0.9) < 1e-9, hypointense.tumourLikeShare);
+    BS_CHECK(!resectionShownWhereSolved(hypointense));
     BS_CHECK_THROWS(tumourResectionFromString("maybe"), InputError, "yes, no, auto");
     for (bool resection : {true, false}) {
       const testing::ClassifiedCase c = lowFieldCase(resection);
