@@ -170,11 +170,13 @@ void printEvaluationAgainstTruth(const json& evaluation)
   }
   if (const json& b = evaluation.value("boundary_under_craniotomy", json::object()); b.contains("shown") && b["shown"].contains("brainshift")) {
     const json &s = b["shown"], &n = b.value("imposed_nodes", json::object());
-    std::printf("brain boundary under the craniotomy (%.0f mm radius) to the true one: update mean %.2f mm, p95 %.2f mm; "
-                "rigid %.2f / %.2f mm; surface nodes %.2f / %.2f mm\n",
+    const json& rigid = s.value("brainshift_rigid", s["truth_rigid"]);
+    std::printf("brain boundary under the craniotomy (%.0f mm radius) to the true one: update mean %.2f mm, p95 %.2f mm "
+                "(from the shown boundary %.2f / %.2f mm; both ways %.2f mm); rigid %.2f / %.2f mm; surface nodes %.2f / %.2f mm\n",
                 b["radius_mm"].get<double>(), s["brainshift"]["mean_abs_mm"].get<double>(), s["brainshift"]["p95_abs_mm"].get<double>(),
-                s.value("brainshift_rigid", s["truth_rigid"])["mean_abs_mm"].get<double>(),
-                s.value("brainshift_rigid", s["truth_rigid"])["p95_abs_mm"].get<double>(), n.value("mean_abs_mm", 0.0), n.value("p95_abs_mm", 0.0));
+                s["brainshift"]["from_shown"]["mean_abs_mm"].get<double>(), s["brainshift"]["from_shown"]["p95_abs_mm"].get<double>(),
+                s["brainshift"]["symmetric_mean_abs_mm"].get<double>(), rigid["mean_abs_mm"].get<double>(), rigid["p95_abs_mm"].get<double>(),
+                n.value("mean_abs_mm", 0.0), n.value("p95_abs_mm", 0.0));
   }
   if (evaluation.contains("uncertainty")) {
     const json& u = evaluation["uncertainty"];

@@ -79,6 +79,15 @@ json boundaryDistancesJson(const BoundaryDistances& b)
           {"max_abs_mm", b.maxAbsMm}};
 }
 
+/// From the true points (the entry's own figures, as before), from the shown points, and both.
+json shownBoundaryJson(const CraniotomyBoundaryEvaluation::ShownBoundary& b)
+{
+  json entry = boundaryDistancesJson(b.toShown);
+  entry["from_shown"] = boundaryDistancesJson(b.toTrue);
+  entry["symmetric_mean_abs_mm"] = b.symmetricMeanAbsMm();
+  return entry;
+}
+
 constexpr const char* kUnderCraniotomy =
   "under the craniotomy: within radius_mm of the craniotomy axis (through craniotomy_centre_lps along craniotomy_axis_lps, "
   "outward, in the preoperative frame and so, by the true rigid motion, in the intraoperative space), where the simulated "
@@ -86,7 +95,10 @@ constexpr const char* kUnderCraniotomy =
   "inside) where lines parallel to the axis, 1 mm apart, first enter the brain; a transform T (intraop -> preop) shows the "
   "preoperative boundary at {y : d(T(y)) = 0}, d the preoperative signed distance on its fine grid (sub-voxel, no "
   "thick slices). shown.*: each true boundary point's distance to the boundary the transform shows, positive where the "
-  "shown boundary lies outside the true one (the sinking under-compensated). imposed_nodes: the active surface's imposed "
+  "shown boundary lies outside the true one (the sinking under-compensated); shown.*.from_shown: each shown boundary "
+  "point's distance to the true boundary, positive where it lies outside the true brain (what the transform shows that is "
+  "not there: preoperative brain left in the gap above a sunken brain); shown.*.symmetric_mean_abs_mm: both directions' "
+  "distances together (the average symmetric surface distance). imposed_nodes: the active surface's imposed "
   "nodes whose preoperative position is within the radius and at most node_depth_mm below the centre, the deformed "
   "node's signed distance to the true boundary (positive outside) less its own preoperative offset; "
   "imposed_nodes_undeformed: the same nodes before their displacement (the rigid result).";
@@ -99,12 +111,12 @@ json boundaryUnderCraniotomyEvaluation(const SimulatedCase& simulated, const fs:
   footprint.outwardAxis = simulated.figures.craniotomyAxis;
   const CraniotomyBoundaryEvaluation evaluation(*simulated.preopLabels, *simulated.intraopToPreop, *simulated.rigidIntraopToPreop, footprint);
   json shown = json::object();
-  shown["truth_rigid"] = boundaryDistancesJson(evaluation.shownBoundary(*simulated.rigidIntraopToPreop));
+  shown["truth_rigid"] = shownBoundaryJson(evaluation.shownBoundary(*simulated.rigidIntraopToPreop));
   std::error_code ec;
   for (const auto& [key, file] : {std::pair<std::string, fs::path>{"brainshift_rigid", updateFolder / "rigid_intraop_to_preop.tfm"},
                                   {"brainshift", updateFolder / "intraop_to_preop.h5"},
                                   {"brainshift_rejected_update", updateFolder / "rejected_intraop_to_preop.h5"}}) {
-    if (fs::exists(file, ec)) shown[key] = boundaryDistancesJson(evaluation.shownBoundary(*readTransform(file)));
+    if (fs::exists(file, ec)) shown[key] = shownBoundaryJson(evaluation.shownBoundary(*readTransform(file)));
   }
   json result = {{"definition", kUnderCraniotomy},
                  {"craniotomy_centre_lps", {footprint.centre[0], footprint.centre[1], footprint.centre[2]}},

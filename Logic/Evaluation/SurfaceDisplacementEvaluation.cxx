@@ -319,17 +319,30 @@ CraniotomyBoundaryEvaluation::~CraniotomyBoundaryEvaluation() = default;
 
 std::size_t CraniotomyBoundaryEvaluation::trueBoundaryPoints() const { return d->truePoints.size(); }
 
-BoundaryDistances CraniotomyBoundaryEvaluation::shownBoundary(const SpatialTransform& intraopToPreop) const
+double CraniotomyBoundaryEvaluation::ShownBoundary::symmetricMeanAbsMm() const
 {
-  const vtkSmartPointer<vtkPolyData> shown = d->boundarySurface(intraopToPreop, nullptr);
+  const std::size_t points = toShown.points + toTrue.points;
+  return points ? (toShown.meanAbsMm * double(toShown.points) + toTrue.meanAbsMm * double(toTrue.points)) / double(points) : 0.0;
+}
+
+CraniotomyBoundaryEvaluation::ShownBoundary CraniotomyBoundaryEvaluation::shownBoundary(const SpatialTransform& intraopToPreop) const
+{
+  std::vector<Vec> shownPoints;
+  const vtkSmartPointer<vtkPolyData> shown = d->boundarySurface(intraopToPreop, &shownPoints);
   if (shown->GetNumberOfCells() == 0) return {};
   auto locator = vtkSmartPointer<vtkCellLocator>::New();
   locator->SetDataSet(shown);
   locator->BuildLocator();
+  ShownBoundary result;
   std::vector<double> distances;
   // A true point inside the shown brain: the shown boundary lies outside it (positive).
   for (const Vec& p : d->truePoints) distances.push_back(Data::signedDistance(locator, p, d->carriedDistanceAt(intraopToPreop, p) <= 0));
-  return distancesOf(distances);
+  result.toShown = distancesOf(distances);
+  distances.clear();
+  // A shown point outside the true brain: positive.
+  for (const Vec& p : shownPoints) distances.push_back(Data::signedDistance(d->trueLocator, p, d->carriedDistanceAt(*d->truth, p) > 0));
+  result.toTrue = distancesOf(distances);
+  return result;
 }
 
 BoundaryDistances CraniotomyBoundaryEvaluation::imposedNodes(vtkPolyData* surface, const SpatialTransform& rigidUsed, bool undeformed) const

@@ -82,10 +82,19 @@ public:
   CraniotomyBoundaryEvaluation(const CraniotomyBoundaryEvaluation&) = delete;
   CraniotomyBoundaryEvaluation& operator=(const CraniotomyBoundaryEvaluation&) = delete;
 
-  /// The true boundary's points under the craniotomy (the lines within the radius), each at its
-  /// distance to the boundary that `intraopToPreop` shows: positive where the shown boundary lies
-  /// outside the true one.
-  BoundaryDistances shownBoundary(const SpatialTransform& intraopToPreop) const;
+  /// The boundary that `intraopToPreop` shows, against the true one under the craniotomy (the
+  /// lines within the radius), both ways: `toShown`, each true boundary point's distance to the
+  /// shown boundary (what the shown boundary misses; positive where the shown boundary lies outside
+  /// the true one); `toTrue`, each shown boundary point's distance to the true boundary (what it
+  /// shows that is not there: an island of preoperative brain left in the gap above a sunken brain
+  /// is near no true point, but far from the true boundary; positive where the shown point lies
+  /// outside the true brain).
+  struct ShownBoundary {
+    BoundaryDistances toShown, toTrue;
+    /// Both directions' distances together (the average symmetric surface distance).
+    double symmetricMeanAbsMm() const;
+  };
+  ShownBoundary shownBoundary(const SpatialTransform& intraopToPreop) const;
 
   /// The imposed nodes of `surface` (brainSurface's output in the model frame of `rigidUsed`:
   /// points x0 + u, arrays "Displacement" and "Imposed") whose preoperative position x0 is under

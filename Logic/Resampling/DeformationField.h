@@ -33,8 +33,10 @@ struct DeformationFieldParameters {
   /// `continuationMinimumMm`, and wide enough that the blend compresses the space along it by at
   /// most `continuationMaximumCompression` (the band's width is the largest difference between
   /// the continued correction and the fade within continuationMaximumMm, divided by it), up to
-  /// `continuationMaximumMm`. 0 for continuationMaximumMm: the fade alone.
-  double continuationMinimumMm = 3.0, continuationMaximumMm = 15.0, continuationMaximumCompression = 2.0 / 3.0;
+  /// `continuationMaximumMm`. 0 for continuationMaximumMm: the fade alone. 30 mm takes a 20 mm sink
+  /// at 2/3 (15 mm folded the gap above the 20 mm scenarios' sunken brain and showed preoperative
+  /// brain in it, up to 16 mm above the true boundary).
+  double continuationMinimumMm = 3.0, continuationMaximumMm = 30.0, continuationMaximumCompression = 2.0 / 3.0;
 };
 
 struct DeformationField {

@@ -7,10 +7,15 @@
 #include "SurfaceDisplacementEvaluation.h"
 #include "SyntheticData.h"
 
+#include <itkCompositeTransform.h>
+#include <itkDisplacementFieldTransform.h>
+#include <itkImageRegionIteratorWithIndex.h>
 #include <vtkDoubleArray.h>
 #include <vtkPointData.h>
 #include <vtkPoints.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <iostream>
 
@@ -45,6 +50,52 @@ double expectedMean(double trueSink, double shownSink, std::size_t& count)
     }
   }
   return sum / double(count);
+}
+
+/// `truth` after a displacement field that sends the intraoperative points 1-4 mm above the sunken
+/// ball's top (in the frame of `rigid`: within 5 mm of the z axis, z' from 46 to 49 mm) to where
+/// `truth` shows the preoperative ball's centre region (0, 0, 20): an island of brain in the gap.
+itk::CompositeTransform<double, 3>::Pointer islandAbove(const itk::Transform<double, 3, 3>& truth, const itk::Euler3DTransform<double>& rigid)
+{
+  auto rigidInverse = itk::Euler3DTransform<double>::New();
+  rigid.GetInverse(rigidInverse);
+  const auto truthInverse = truth.GetInverseTransform();
+  const PhysicalPoint target = truthInverse->TransformPoint(testing::point(0, 0, 20));
+  PhysicalPoint low, high;
+  for (unsigned a = 0; a < 3; ++a) {
+    low[a] = 1e9;
+    high[a] = -1e9;
+  }
+  for (double x : {-6.0, 6.0}) {
+    for (double y : {-6.0, 6.0}) {
+      for (double z : {44.0, 51.0}) {
+        const PhysicalPoint corner = rigidInverse->TransformPoint(testing::point(x, y, z));
+        for (unsigned a = 0; a < 3; ++a) {
+          low[a] = std::min(low[a], corner[a]);
+          high[a] = std::max(high[a], corner[a]);
+        }
+      }
+    }
+  }
+  ScalarImage::SizeType size;
+  for (unsigned a = 0; a < 3; ++a) size[a] = itk::SizeValueType(std::ceil((high[a] - low[a]) / 0.5)) + 1;
+  auto field = testing::makeImage<itk::Image<itk::Vector<double, 3>, 3>>(testing::grid(size, {0.5, 0.5, 0.5}, low));
+  itk::ImageRegionIteratorWithIndex<itk::Image<itk::Vector<double, 3>, 3>> it(field, field->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint y;
+    field->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+    const PhysicalPoint frame = rigid.TransformPoint(y);
+    itk::Vector<double, 3> d;
+    d.Fill(0.0);
+    if (std::hypot(frame[0], frame[1]) < 5.0 && frame[2] >= 46.0 && frame[2] <= 49.0) d = target - y;
+    it.Set(d);
+  }
+  auto displacement = itk::DisplacementFieldTransform<double, 3>::New();
+  displacement->SetDisplacementField(field);
+  auto composite = itk::CompositeTransform<double, 3>::New();
+  composite->AddTransform(const_cast<itk::Transform<double, 3, 3>*>(&truth)); // applied second
+  composite->AddTransform(displacement);                                     // applied first
+  return composite;
 }
 
 /// Nodes on the preoperative ball: 40 under the craniotomy (within 25 mm of the axis, on top), moved
@@ -91,7 +142,8 @@ int CraniotomyBoundaryEvaluationTest(int, char*[])
     std::size_t lines = 0;
     const double rigidExpected = expectedMean(5.0, 0.0, lines);
     BS_CHECK(evaluation.trueBoundaryPoints() == lines); // every line within 30 mm, none beyond
-    const BoundaryDistances shownRigid = evaluation.shownBoundary(*rigid);
+    const CraniotomyBoundaryEvaluation::ShownBoundary rigidBothWays = evaluation.shownBoundary(*rigid);
+    const BoundaryDistances& shownRigid = rigidBothWays.toShown;
     std::cout << "rigid: " << shownRigid.points << " points, signed " << shownRigid.signedMeanMm << ", mean " << shownRigid.meanAbsMm
               << " (expected " << rigidExpected << "), p95 " << shownRigid.p95AbsMm << ", max " << shownRigid.maxAbsMm << '\n';
     BS_CHECK(shownRigid.points == lines);
@@ -99,15 +151,33 @@ int CraniotomyBoundaryEvaluationTest(int, char*[])
     BS_CHECK_NEAR(shownRigid.signedMeanMm, rigidExpected, 0.15); // shown outside: under-compensated
     BS_CHECK(shownRigid.maxAbsMm < 5.3 && shownRigid.p95AbsMm > 4.6);
 
-    const BoundaryDistances partial = evaluation.shownBoundary(*sunkBy(2.0));
+    // From the shown points: the rigid boundary lies 5 mm above the sunken one under the opening.
+    std::cout << "rigid, from the shown points: " << rigidBothWays.toTrue.points << " points, signed " << rigidBothWays.toTrue.signedMeanMm
+              << ", mean " << rigidBothWays.toTrue.meanAbsMm << "; both ways " << rigidBothWays.symmetricMeanAbsMm() << '\n';
+    BS_CHECK(rigidBothWays.toTrue.points == lines);
+    BS_CHECK_NEAR(rigidBothWays.toTrue.signedMeanMm, rigidExpected, 0.3);
+    BS_CHECK_NEAR(rigidBothWays.symmetricMeanAbsMm(), 0.5 * (rigidBothWays.toTrue.meanAbsMm + shownRigid.meanAbsMm), 1e-9);
+    const BoundaryDistances partial = evaluation.shownBoundary(*sunkBy(2.0)).toShown;
     BS_CHECK_NEAR(partial.signedMeanMm, expectedMean(5.0, 2.0, lines), 0.15);
-    const BoundaryDistances overshoot = evaluation.shownBoundary(*sunkBy(7.0));
+    const BoundaryDistances overshoot = evaluation.shownBoundary(*sunkBy(7.0)).toShown;
     std::cout << "2 mm shown: " << partial.signedMeanMm << "; 7 mm shown: " << overshoot.signedMeanMm << " (expected "
               << expectedMean(5.0, 7.0, lines) << ")\n";
     BS_CHECK_NEAR(overshoot.signedMeanMm, expectedMean(5.0, 7.0, lines), 0.15); // negative: the shown lies inside
     BS_CHECK(overshoot.signedMeanMm < -1.0);
-    const BoundaryDistances exact = evaluation.shownBoundary(*truth);
-    BS_CHECK(exact.points == lines && exact.maxAbsMm < 1e-3);
+    const CraniotomyBoundaryEvaluation::ShownBoundary exact = evaluation.shownBoundary(*truth);
+    BS_CHECK(exact.toShown.points == lines && exact.toShown.maxAbsMm < 1e-3);
+    BS_CHECK(exact.toTrue.points == lines && exact.toTrue.maxAbsMm < 1e-3);
+
+    // The truth with an island: what lies 1-4 mm above the sunken boundary within 5 mm of the axis
+    // is shown as deep brain (preoperative brain left in the gap). Seen from the true points the
+    // island's walls are near; from the shown points, its top is 4 mm off.
+    const auto island = islandAbove(*truth, *rigid);
+    const CraniotomyBoundaryEvaluation::ShownBoundary withIsland = evaluation.shownBoundary(*island);
+    std::cout << "island: from the true points mean " << withIsland.toShown.meanAbsMm << " max " << withIsland.toShown.maxAbsMm
+              << "; from the shown points mean " << withIsland.toTrue.meanAbsMm << " max " << withIsland.toTrue.maxAbsMm << '\n';
+    BS_CHECK(withIsland.toTrue.maxAbsMm > 3.5 && withIsland.toTrue.maxAbsMm < 4.5);
+    BS_CHECK(withIsland.toTrue.signedMeanMm > 0.05); // outside the true brain
+    BS_CHECK(withIsland.toTrue.meanAbsMm > withIsland.toShown.meanAbsMm);
 
     // Surface nodes: those under the craniotomy moved the true 5 mm (down: -5 z) land on the true boundary.
     const auto moved = ballNodes(-5.0);

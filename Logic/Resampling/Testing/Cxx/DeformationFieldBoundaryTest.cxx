@@ -1,4 +1,4 @@
-// The boundary the field shows where the brain sank: a box of brain whose top sinks 6 mm while its
+// The boundary the field shows where the brain sank: a box of brain whose top sinks 6 mm (and 20 mm) while its
 // bottom stays (u_z falling linearly with depth, exact inside the mesh), seen on a grid of 2.5 mm
 // slices. Above the sunken top face the mapping must show the preoperative space above the brain,
 // so the boundary the warped labels show is the deformed face (within half a millimetre). The fade
@@ -25,23 +25,24 @@ namespace {
 using namespace brainshift;
 using brainshift::testing::point;
 
-constexpr double BoxTop = 20.0, BoxBottom = -20.0, SinkMm = 6.0;
+constexpr double BoxTop = 20.0, BoxBottom = -20.0;
 
-/// The box [-20, 20] mm cubed in cubes of 4 mm, each cut into the six tetrahedra about its
-/// diagonal (Kuhn): a conforming mesh with flat faces.
-vtkSmartPointer<vtkUnstructuredGrid> kuhnBox()
+/// The box [-20, 20] mm squared by [bottom, 20] mm tall in cubes of 4 mm, each cut into the six
+/// tetrahedra about its diagonal (Kuhn): a conforming mesh with flat faces.
+vtkSmartPointer<vtkUnstructuredGrid> kuhnBox(double bottom)
 {
   constexpr int cells = 10;
   constexpr double step = (BoxTop - BoxBottom) / cells;
+  const int layers = int(std::lround((BoxTop - bottom) / step));
   auto mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
   vtkNew<vtkPoints> points;
   auto node = [](int i, int j, int k) { return vtkIdType(i + (cells + 1) * (j + (cells + 1) * k)); };
-  for (int k = 0; k <= cells; ++k)
+  for (int k = 0; k <= layers; ++k)
     for (int j = 0; j <= cells; ++j)
-      for (int i = 0; i <= cells; ++i) points->InsertNextPoint(BoxBottom + step * i, BoxBottom + step * j, BoxBottom + step * k);
+      for (int i = 0; i <= cells; ++i) points->InsertNextPoint(BoxBottom + step * i, BoxBottom + step * j, bottom + step * k);
   mesh->SetPoints(points);
   const int orders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < cells; ++k)
+  for (int k = 0; k < layers; ++k)
     for (int j = 0; j < cells; ++j)
       for (int i = 0; i < cells; ++i)
         for (const auto& order : orders) {
@@ -53,6 +54,23 @@ vtkSmartPointer<vtkUnstructuredGrid> kuhnBox()
           }
           mesh->InsertNextCell(VTK_TETRA, 4, ids);
         }
+  return mesh;
+}
+
+/// The box from `bottom` up whose top sinks `sinkMm` while its bottom stays (u_z falling linearly with depth).
+vtkSmartPointer<vtkUnstructuredGrid> sinkingBox(double sinkMm, double bottom = BoxBottom)
+{
+  const vtkSmartPointer<vtkUnstructuredGrid> mesh = kuhnBox(bottom);
+  vtkNew<vtkDoubleArray> displacement;
+  displacement->SetName("Displacement");
+  displacement->SetNumberOfComponents(3);
+  for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) {
+    double x[3];
+    mesh->GetPoint(i, x);
+    const double u[3] = {0.0, 0.0, -sinkMm * (x[2] - bottom) / (BoxTop - bottom)};
+    displacement->InsertNextTuple(u);
+  }
+  mesh->GetPointData()->AddArray(displacement);
   return mesh;
 }
 
@@ -74,8 +92,8 @@ double shownTopFace(const DeformationField& f, long i, long j)
 }
 
 /// The shown top face over the columns within 10 mm of the box's axis: the worst distance from the
-/// deformed face (BoxTop - SinkMm) and the mean signed one (positive: too high).
-void measureTopFace(const DeformationField& f, double& worst, double& meanSigned)
+/// deformed face (BoxTop - sinkMm) and the mean signed one (positive: too high).
+void measureTopFace(const DeformationField& f, double sinkMm, double& worst, double& meanSigned)
 {
   const auto size = f.field->GetLargestPossibleRegion().GetSize();
   worst = 0;
@@ -86,7 +104,7 @@ void measureTopFace(const DeformationField& f, double& worst, double& meanSigned
       PhysicalPoint y;
       f.field->TransformIndexToPhysicalPoint({{i, j, 0}}, y);
       if (std::abs(y[0] - 1.0) > 10 || std::abs(y[1] - 1.0) > 10) continue;
-      const double error = shownTopFace(f, i, j) - (BoxTop - SinkMm);
+      const double error = shownTopFace(f, i, j) - (BoxTop - sinkMm);
       worst = std::max(worst, std::abs(error));
       sum += error;
       ++columns;
@@ -100,19 +118,7 @@ void measureTopFace(const DeformationField& f, double& worst, double& meanSigned
 int DeformationFieldBoundaryTest(int, char*[])
 {
   return brainshift::testing::runTest("DeformationFieldBoundaryTest", [] {
-    const vtkSmartPointer<vtkUnstructuredGrid> mesh = kuhnBox();
-    vtkNew<vtkDoubleArray> displacement;
-    displacement->SetName("Displacement");
-    displacement->SetNumberOfComponents(3);
-    for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) {
-      double x[3];
-      mesh->GetPoint(i, x);
-      const double u[3] = {0.0, 0.0, -SinkMm * (x[2] - BoxBottom) / (BoxTop - BoxBottom)};
-      displacement->InsertNextTuple(u);
-    }
-    mesh->GetPointData()->AddArray(displacement);
-    double bounds[6];
-    mesh->GetBounds(bounds);
+    const vtkSmartPointer<vtkUnstructuredGrid> mesh = sinkingBox(6.0);
     const auto identity = itk::IdentityTransform<double, 3>::New();
     const ImageGeometry grid = brainshift::testing::grid({{60, 60, 28}}, {1.0, 1.0, 2.5}, point(-29, -29, -29.5));
 
@@ -121,8 +127,8 @@ int DeformationFieldBoundaryTest(int, char*[])
     fadeOnly.continuationMaximumMm = 0;
     const DeformationField faded = intraopToPreopField(mesh, *identity, grid, fadeOnly, "mesh.vtu");
     double worstContinued = 0, meanContinued = 0, worstFaded = 0, meanFaded = 0;
-    measureTopFace(continued, worstContinued, meanContinued);
-    measureTopFace(faded, worstFaded, meanFaded);
+    measureTopFace(continued, 6.0, worstContinued, meanContinued);
+    measureTopFace(faded, 6.0, worstFaded, meanFaded);
     std::cout << "shown top face, continued: worst " << worstContinued << " mm, mean " << meanContinued << " mm (band "
               << continued.continuationBandMm << " mm, " << continued.continuedVoxels << " voxels, " << continued.foldedVoxels
               << " folded, min Jacobian " << continued.minimumJacobian << "); fade alone: worst " << worstFaded << " mm, mean "
@@ -143,11 +149,30 @@ int DeformationFieldBoundaryTest(int, char*[])
               << squeezed.foldedVoxelsInMesh << " of them in the mesh\n";
     BS_CHECK_MSG(squeezed.foldedVoxels >= 50, squeezed.foldedVoxels << " folded: the narrow band no longer folds");
     BS_CHECK_MSG(squeezed.foldedVoxelsInMesh == 0, squeezed.foldedVoxelsInMesh << " folded in the mesh");
+    // A 20 mm sink, the scenarios' deepest: the band widens to take it at 2/3 compression (30 mm
+    // at most), the face is shown where it sank and nothing folds. Capped at 15 mm, as it was, the
+    // band folded the gap above the face (on the 20 mm scenarios it showed preoperative brain up to
+    // 16 mm above the sunken one there).
+    const vtkSmartPointer<vtkUnstructuredGrid> deepMesh = sinkingBox(20.0, -100.0);
+    const ImageGeometry tallGrid = brainshift::testing::grid({{60, 60, 60}}, {1.0, 1.0, 2.5}, point(-29, -29, -109.5));
+    const DeformationField deep = intraopToPreopField(deepMesh, *identity, tallGrid, {}, "mesh.vtu");
+    DeformationFieldParameters formerCap;
+    formerCap.continuationMaximumMm = 15.0;
+    const DeformationField capped = intraopToPreopField(deepMesh, *identity, tallGrid, formerCap, "mesh.vtu");
+    double worstDeep = 0, meanDeep = 0;
+    measureTopFace(deep, 20.0, worstDeep, meanDeep);
+    std::cout << "20 mm sink: shown top face worst " << worstDeep << " mm, mean " << meanDeep << " mm (band " << deep.continuationBandMm
+              << " mm, " << deep.foldedVoxels << " folded, min Jacobian " << deep.minimumJacobian << "); band capped at 15 mm: "
+              << capped.foldedVoxels << " folded\n";
+    BS_CHECK_MSG(worstDeep < 0.5, "the 20 mm sink's face shown " << worstDeep << " mm off");
+    BS_CHECK(deep.continuationBandMm > 20.0 && deep.continuationBandMm <= 30.0);
+    BS_CHECK_MSG(deep.foldedVoxels == 0, deep.foldedVoxels << " folded");
+    BS_CHECK_MSG(capped.foldedVoxels > 0, "a 15 mm band no longer folds a 20 mm sink: the test no longer tells");
     DeformationFieldParameters absurd;
     absurd.continuationMaximumCompression = 0;
     BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "continuation");
     absurd = {};
-    absurd.continuationMinimumMm = 20;
+    absurd.continuationMinimumMm = 40;
     BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "minimum <= maximum");
   });
 }
