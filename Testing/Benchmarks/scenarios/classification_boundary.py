@@ -43,7 +43,10 @@ def first_entries(labels, ras_to_voxel, starts_lps, axis, step=0.25, length=90.0
     return np.where(brain.any(1), brain.argmax(1) * step, np.nan)
 
 
-def measure(run, labels_file=None):
+def craniotomy_lines(run):
+    """The lines' starts (40 mm outside the craniotomy's centre, within 30 mm of its axis, 1 mm apart;
+    intraoperative LPS), the axis (outward: the lines run along minus it) and each line's distance
+    from the axis."""
     figures = json.load(open(os.path.join(run, 'case', 'case.json')))['figures']
     r, c, t = euler_transform(os.path.join(run, 'case', 'truth', 'rigid_intraop_to_preop.tfm'))
     centre = np.linalg.solve(r, np.array(figures['craniotomy_centre_lps']) - c - t) + c  # preop -> intraop
@@ -56,6 +59,11 @@ def measure(run, labels_file=None):
     gu, gw = np.meshgrid(grid, grid)
     inside = gu ** 2 + gw ** 2 <= 900
     starts = centre + 40 * axis + gu[inside][:, None] * u + gw[inside][:, None] * w
+    return starts, axis, np.hypot(gu[inside], gw[inside])
+
+
+def measure(run, labels_file=None):
+    starts, axis, _ = craniotomy_lines(run)
     truth = nib.load(os.path.join(run, 'case', 'truth', 'intraop_labels.nii.gz'))
     classified = nib.load(labels_file or os.path.join(run, 'intraop_labels.nii.gz'))
     d = (first_entries(np.asarray(truth.dataobj).astype(np.int16), np.linalg.inv(truth.affine), starts, axis) -

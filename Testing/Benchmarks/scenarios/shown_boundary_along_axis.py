@@ -15,7 +15,6 @@ so does a steep wall a little misplaced.
 prints per run: lines, signed mean, mean |d| and p95 |d| in mm, and the same within 10, 20, 25 and 30 mm
 of the axis. Needs numpy, scipy and nibabel.
 """
-import json
 import os
 import re
 import sys
@@ -25,7 +24,7 @@ import numpy as np
 from scipy import ndimage
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from classification_boundary import euler_transform, first_entries  # noqa: E402
+from classification_boundary import craniotomy_lines, first_entries  # noqa: E402
 
 
 def read_vector_nrrd(path):
@@ -47,19 +46,7 @@ def read_vector_nrrd(path):
 
 
 def measure(run, step=0.25, length=90.0):
-    figures = json.load(open(os.path.join(run, 'case', 'case.json')))['figures']
-    r, c, t = euler_transform(os.path.join(run, 'case', 'truth', 'rigid_intraop_to_preop.tfm'))
-    centre = np.linalg.solve(r, np.array(figures['craniotomy_centre_lps']) - c - t) + c  # preop -> intraop
-    axis = np.linalg.solve(r, np.array(figures['craniotomy_axis_lps']))
-    axis /= np.linalg.norm(axis)
-    u = np.cross(axis, [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    w = np.cross(axis, u)
-    grid = np.arange(-30.0, 31.0, 1.0)
-    gu, gw = np.meshgrid(grid, grid)
-    inside = gu ** 2 + gw ** 2 <= 900
-    starts = centre + 40 * axis + gu[inside][:, None] * u + gw[inside][:, None] * w
-    radius = np.hypot(gu[inside], gw[inside])
+    starts, axis, radius = craniotomy_lines(run)
     truth = nib.load(os.path.join(run, 'case', 'truth', 'intraop_labels.nii.gz'))
     true_entry = first_entries(np.asarray(truth.dataobj).astype(np.int16), np.linalg.inv(truth.affine), starts, axis, step, length)
 
