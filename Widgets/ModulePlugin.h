@@ -26,6 +26,10 @@ struct ViewLayers {
 
 /// What the host offers a panel besides the scene.
 struct ModuleContext {
+  /// The configuration file the host was given (`brainshift-host --config`, checked at start), the
+  /// one `register --config` reads: each stage panel takes its defaults from it through the same
+  /// function as the command line (Configuration::loadOrDefaults). Empty: the product's defaults.
+  std::string configurationFile;
   /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
   std::function<void(const std::array<double, 3>& lps)> showPoint;
   /// Calls `onPick` with every point the user picks in a slice view (LPS mm), for as long as

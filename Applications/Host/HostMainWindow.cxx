@@ -17,7 +17,7 @@
 
 namespace brainshift {
 
-HostMainWindow::HostMainWindow(const QString& modulesFolder, QWidget* parent)
+HostMainWindow::HostMainWindow(const QString& modulesFolder, const QString& configurationFile, QWidget* parent)
   : QMainWindow(parent)
 {
   setWindowTitle(tr("BrainShift"));
@@ -40,7 +40,7 @@ HostMainWindow::HostMainWindow(const QString& modulesFolder, QWidget* parent)
   dataPanel_ = new DataPanel(scene_, *views_, panels_);
   moduleSelector_->addItem(tr("Data"));
   panels_->addWidget(dataPanel_);
-  addModules(modulesFolder);
+  addModules(modulesFolder, configurationFile);
   connect(moduleSelector_, qOverload<int>(&QComboBox::currentIndexChanged), panels_, &QStackedWidget::setCurrentIndex);
 
   // Models shown in 3D follow the scene; the update waits for the event loop so that a scene
@@ -64,11 +64,12 @@ HostMainWindow::~HostMainWindow()
   delete centralWidget();
 }
 
-void HostMainWindow::addModules(const QString& modulesFolder)
+void HostMainWindow::addModules(const QString& modulesFolder, const QString& configurationFile)
 {
   ModuleDiscovery discovery = discoverModules(modulesFolder);
   moduleFailures_ = discovery.failures;
   ModuleContext context;
+  context.configurationFile = configurationFile.toStdString();
   context.showPoint = [this](const std::array<double, 3>& lps) {
     PhysicalPoint p;
     for (int i = 0; i < 3; ++i) p[i] = lps[i];

@@ -17,8 +17,9 @@ namespace brainshift {
 class HostMainWindow : public QMainWindow {
   Q_OBJECT
 public:
-  /// Loads the modules of `modulesFolder` (see defaultModulesFolder()).
-  explicit HostMainWindow(const QString& modulesFolder, QWidget* parent = nullptr);
+  /// Loads the modules of `modulesFolder` (see defaultModulesFolder()); their panels take their
+  /// defaults from `configurationFile` (empty: the product's; ModuleContext::configurationFile).
+  explicit HostMainWindow(const QString& modulesFolder, const QString& configurationFile = {}, QWidget* parent = nullptr);
   ~HostMainWindow() override;
 
   Scene& scene() { return scene_; }
@@ -44,7 +45,7 @@ public:
 
 private:
   void buildMenus();
-  void addModules(const QString& modulesFolder);
+  void addModules(const QString& modulesFolder, const QString& configurationFile);
   QString report(const LoadResult& result, const QString& success);
   void runFileDialog(const QString& title, const QString& filter, QString (HostMainWindow::*load)(const QString&));
   void updateThreeDView();

@@ -1,11 +1,12 @@
 // brainshift-host: the BrainShift workstation.
-//   brainshift-host [--module TITLE] [--screenshot FILE.png] [VOLUME | SCENE.mrml ...]
+//   brainshift-host [--config FILE.json] [--module TITLE] [--screenshot FILE.png] [VOLUME | SCENE.mrml ...]
 //   brainshift-host --preop-image F --preop-labels F [--overlay NAME=F ...] --session-dir DIR
 //                   [--replace-session] [--scan F ...] [--screenshot FILE.png]
 // opens the volumes and scenes given, shows the module TITLE, and with --screenshot saves the
 // whole window as an image and exits (scripts/host-screenshot.sh makes the README's pictures).
 // The second form opens the "Intraoperative update" module on a case, prepares it and updates it
 // with each --scan in turn, as the surgeon would; --screenshot then waits for the last scan.
+#include "Configuration.h"
 #include "HostMainWindow.h"
 #include "ScriptedSession.h"
 #include "VolumeIO.h"
@@ -66,14 +67,23 @@ int main(int argc, char* argv[])
   const QCommandLineOption sessionDir("session-dir", "Intraoperative update: the session's folder.", "folder");
   const QCommandLineOption replaceSession("replace-session", "Intraoperative update: replace an earlier session in the folder.");
   const QCommandLineOption scan("scan", "Intraoperative update: a scan to update with (repeatable, in order).", "file");
-  for (const QCommandLineOption* option : {&module, &screenshot, &preopImage, &preopLabels, &overlay, &sessionDir, &replaceSession, &scan}) {
+  const QCommandLineOption config("config", "The JSON configuration of `brainshift register --config`: every panel's defaults.", "file");
+  for (const QCommandLineOption* option : {&module, &screenshot, &preopImage, &preopLabels, &overlay, &sessionDir, &replaceSession, &scan, &config}) {
     parser.addOption(*option);
   }
   parser.addPositionalArgument("files", "Volumes (NIfTI, NRRD, DICOM folders) and .mrml scenes to open.", "[files...]");
   parser.process(application);
 
   brainshift::registerIOFactories();
-  brainshift::HostMainWindow window(brainshift::defaultModulesFolder());
+  if (parser.isSet(config)) { // checked once here: the panels read it without a word
+    try {
+      brainshift::Configuration::load(parser.value(config).toStdString());
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "brainshift-host: %s\n", e.what());
+      return 2;
+    }
+  }
+  brainshift::HostMainWindow window(brainshift::defaultModulesFolder(), parser.value(config));
   bool loaded = true;
   for (const QString& file : parser.positionalArguments()) {
     const QString error = file.endsWith(".mrml") ? window.loadScene(file) : window.loadVolume(file);

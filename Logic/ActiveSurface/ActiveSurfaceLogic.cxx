@@ -1,5 +1,7 @@
 #include "ActiveSurfaceLogic.h"
 
+#include "Configuration.h"
+
 #include "DistanceMaps.h"
 #include "LabelMapMesher.h"
 
@@ -1315,6 +1317,19 @@ vtkDataArray* checkedCellLabels(vtkUnstructuredGrid* mesh, const LabelImage& int
   return cellLabels;
 }
 } // namespace
+
+ActiveSurfaceParameters activeSurfaceParametersFrom(const Configuration& configuration)
+{
+  ActiveSurfaceParameters parameters;
+  parameters.membraneWeight = configuration.surfaceMembraneWeight;
+  parameters.bendingWeight = configuration.surfaceBendingWeight;
+  parameters.imageWeight = configuration.surfaceImageWeight;
+  parameters.maximumIterations = configuration.surfaceMaximumIterations;
+  parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
+  parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
+  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
+  return parameters;
+}
 
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
                                        const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,

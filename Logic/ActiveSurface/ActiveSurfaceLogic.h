@@ -156,6 +156,12 @@ struct ActiveSurfaceInputNames {
 /// and preoperative labels, gives it back: the preoperative fit is skipped (the serial scan's
 /// saving); a surface of another mesh (other node ids or count) is an InputError naming
 /// `names.previousSurface`.
+struct Configuration;
+/// The surface stage's parameters from the one configuration (the elastic and image weights, the
+/// iterations, the matching along the sinking direction, snapping, the field of view's hold): what
+/// the command line and the Brain deformation panel start from.
+ActiveSurfaceParameters activeSurfaceParametersFrom(const Configuration& configuration);
+
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
                                        const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
                                        const ActiveSurfaceParameters& parameters,

@@ -93,6 +93,8 @@ struct Configuration {
   /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a
   /// Young's modulus outside 1 Pa to 1e9 Pa, and the like.
   static Configuration load(const std::filesystem::path& path);
+  /// load(path), or the defaults for an empty path.
+  static Configuration loadOrDefaults(const std::filesystem::path& path) { return path.empty() ? Configuration{} : load(path); }
 
   /// Checks the values; `source` names where they came from in the error message.
   void validate(const std::string& source) const;

@@ -1,4 +1,6 @@
 #include "LabelMapMesher.h"
+
+#include "Configuration.h"
 #include "TetrahedronGeometry.h"
 
 #include "BoundaryNodeSnapping.h"
@@ -638,6 +640,20 @@ TetrahedralMeshArrays meshLabelMapWithCgal(const LabelImage&, const MeshingParam
   throw NotAvailableError("meshing: the CGAL backend is not available: BrainShift was built without CGAL");
 }
 #endif
+
+MeshingParameters meshingParametersFrom(const Configuration& configuration)
+{
+  MeshingParameters parameters;
+  parameters.resolutionMm = configuration.meshResolutionMm;
+  parameters.labels = configuration.meshLabels;
+  parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
+  parameters.gradingRate = configuration.meshGrading;
+  parameters.coarseningLevels = configuration.meshCoarseningLevels;
+  if (configuration.meshRegionOfInterestRadiusMm > 0) {
+    parameters.regionOfInterest = MeshingParameters::Sphere{configuration.meshRegionOfInterestCenterLps, configuration.meshRegionOfInterestRadiusMm};
+  }
+  return parameters;
+}
 
 LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& parameters)
 {

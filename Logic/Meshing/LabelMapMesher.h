@@ -70,6 +70,11 @@ struct LabelMapMesh {
   Warnings warnings;
 };
 
+struct Configuration;
+/// The mesh stage's parameters from the one configuration (resolution, tissues, backend, grading,
+/// region of interest): what the command line and the Meshing panel start from.
+MeshingParameters meshingParametersFrom(const Configuration& configuration);
+
 /// Meshes the chosen tissues. InputError for an empty label map, tissues absent from it, a
 /// resolution finer than the voxels or coarser than the tissues; a tissue that vanishes at the
 /// chosen resolution is an error naming it.

@@ -1,5 +1,7 @@
 #include "RigidRegistrationLogic.h"
 
+#include "Configuration.h"
+
 #include "DistanceMaps.h"
 #include "IntensityStatistics.h"
 #include "LibraryMessages.h"
@@ -534,6 +536,22 @@ public:
   MaskObject::Pointer mask;                 ///< null without labels
   std::vector<bool> maskKeepsRange;         ///< of each level: maskKeepsIntensityRange
 };
+
+RigidRegistrationParameters rigidRegistrationParametersFrom(const Configuration& configuration)
+{
+  // The pyramid's first levels and a share of the samples (the configuration's speed knobs).
+  RigidRegistrationParameters parameters;
+  const std::size_t levels = std::min<std::size_t>(configuration.rigidLevels, parameters.levelSpacingMm.size());
+  parameters.levelSpacingMm.resize(levels);
+  parameters.iterationsPerLevel.resize(levels);
+  parameters.stepMmPerLevel.resize(levels);
+  parameters.minimumStepMmPerLevel.resize(levels);
+  parameters.samplesPerLevel.resize(levels);
+  for (unsigned& samples : parameters.samplesPerLevel) {
+    samples = std::max(1000u, unsigned(std::lround(samples * configuration.rigidSamplingFraction)));
+  }
+  return parameters;
+}
 
 std::shared_ptr<const PreparedRigidMoving> prepareRigidMoving(const ScalarImage& preop, const LabelImage* preopLabels,
                                                               const RigidRegistrationParameters& parameters)

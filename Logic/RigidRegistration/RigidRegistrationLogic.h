@@ -92,6 +92,11 @@ struct RigidRegistrationResult {
   Warnings warnings;
 };
 
+struct Configuration;
+/// The rigid stage's parameters from the one configuration (the pyramid's levels, the share of the
+/// metric's samples): what the command line and the Rigid registration panel start from.
+RigidRegistrationParameters rigidRegistrationParametersFrom(const Configuration& configuration);
+
 /// The preoperative side of the registration, the same for every scan of a case: the moving
 /// image's pyramid, its foreground threshold and the metric's mask from the labels (`labels` may be
 /// null). A session (brainshift watch) prepares it once.

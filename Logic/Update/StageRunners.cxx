@@ -49,19 +49,8 @@ nlohmann::json finiteOrNull(double value) { return std::isfinite(value) ? nlohma
 void runRigidStage(RunContext& context)
 {
   Stopwatch clock;
-  RigidRegistrationParameters parameters;
+  RigidRegistrationParameters parameters = rigidRegistrationParametersFrom(context.configuration());
   parameters.cancel = context.cancelFlag();
-  // The pyramid's first levels and a share of the samples (the configuration's speed knobs).
-  const Configuration& configuration = context.configuration();
-  const std::size_t levels = std::min<std::size_t>(configuration.rigidLevels, parameters.levelSpacingMm.size());
-  parameters.levelSpacingMm.resize(levels);
-  parameters.iterationsPerLevel.resize(levels);
-  parameters.stepMmPerLevel.resize(levels);
-  parameters.minimumStepMmPerLevel.resize(levels);
-  parameters.samplesPerLevel.resize(levels);
-  for (unsigned& samples : parameters.samplesPerLevel) {
-    samples = std::max(1000u, unsigned(std::lround(samples * configuration.rigidSamplingFraction)));
-  }
   // A later scan starts from the previous scan's alignment instead of the multi-start search.
   const std::optional<fs::path> previousRigid = context.previousFile("rigid_intraop_to_preop.tfm");
   if (previousRigid) {
@@ -470,7 +459,13 @@ void runSimulateStage(RunContext& context)
 }
 
 namespace {
-ActiveSurfaceParameters activeSurfaceParametersFrom(RunContext& context); // with the surface stage
+/// The configuration's surface parameters, with this run's Cancel.
+ActiveSurfaceParameters surfaceParametersFor(RunContext& context)
+{
+  ActiveSurfaceParameters parameters = activeSurfaceParametersFrom(context.configuration());
+  parameters.cancel = context.cancelFlag();
+  return parameters;
+}
 
 /// The preoperative brain surface as the active surface finds it on the preoperative data alone
 /// (the preoperative image and labels as their own scan, through the identity). What a scan
@@ -490,7 +485,7 @@ void preparePreoperativeSurface(RunContext& context)
   names.labels = names.preopLabels = context.options().preopLabels.string();
   names.rigid = "the identity";
   const ActiveSurfaceResult result =
-    deformBrainSurface(mesh, &labels, labels, &context.preopImage("prepare"), *identity, activeSurfaceParametersFrom(context), names, nullptr);
+    deformBrainSurface(mesh, &labels, labels, &context.preopImage("prepare"), *identity, surfaceParametersFor(context), names, nullptr);
   context.products().writeModel(result.surface, context.output("brain_surface.vtp"));
   context.report().setStage("preoperative_surface", {{"wall_seconds", clock.seconds()},
                                                      {"surface_nodes", result.surfaceNodes},
@@ -546,17 +541,11 @@ void runMeshStage(RunContext& context)
 {
   Stopwatch clock;
   const Configuration& configuration = context.configuration();
-  MeshingParameters parameters;
+  MeshingParameters parameters = meshingParametersFrom(configuration);
   parameters.cancel = context.cancelFlag();
-  parameters.resolutionMm = configuration.meshResolutionMm;
-  parameters.labels = configuration.meshLabels;
-  parameters.backend = configuration.meshBackend == "cgal" ? MeshingBackend::Cgal : MeshingBackend::Lattice;
-  parameters.gradingRate = configuration.meshGrading;
-  parameters.coarseningLevels = configuration.meshCoarseningLevels;
   nlohmann::json regionOfInterest = nullptr;
-  if (configuration.meshRegionOfInterestRadiusMm > 0) {
-    parameters.regionOfInterest = MeshingParameters::Sphere{configuration.meshRegionOfInterestCenterLps, configuration.meshRegionOfInterestRadiusMm};
-    regionOfInterest = {{"center_lps", configuration.meshRegionOfInterestCenterLps}, {"radius_mm", configuration.meshRegionOfInterestRadiusMm}};
+  if (parameters.regionOfInterest) {
+    regionOfInterest = {{"center_lps", parameters.regionOfInterest->centerLps}, {"radius_mm", parameters.regionOfInterest->radiusMm}};
   }
   // A later scan of the same case (same preoperative labels, checked by register) reuses the
   // previous scan's mesh when it was made with the same settings.
@@ -623,23 +612,6 @@ void runMeshStage(RunContext& context)
 
 namespace brainshift {
 
-namespace {
-ActiveSurfaceParameters activeSurfaceParametersFrom(RunContext& context)
-{
-  const Configuration& configuration = context.configuration();
-  ActiveSurfaceParameters parameters;
-  parameters.cancel = context.cancelFlag();
-  parameters.membraneWeight = configuration.surfaceMembraneWeight;
-  parameters.bendingWeight = configuration.surfaceBendingWeight;
-  parameters.imageWeight = configuration.surfaceImageWeight;
-  parameters.maximumIterations = configuration.surfaceMaximumIterations;
-  parameters.matchAlongSinkingDirection = configuration.surfaceMatchAlongSinkingDirection;
-  parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
-  parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
-  return parameters;
-}
-} // namespace
-
 void runSurfaceStage(RunContext& context)
 {
   Stopwatch clock;
@@ -658,7 +630,7 @@ void runSurfaceStage(RunContext& context)
   const SpatialTransform::Pointer rigid = readTransform(rigidFile);
   if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   const LabelImage::Pointer labels = context.products().readLabelVolume(labelsFile);
-  const ActiveSurfaceParameters parameters = activeSurfaceParametersFrom(context);
+  const ActiveSurfaceParameters parameters = surfaceParametersFor(context);
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
   names.labels = labelsFile.string();

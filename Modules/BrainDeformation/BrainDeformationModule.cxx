@@ -12,7 +12,10 @@ class BrainDeformationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Brain deformation"); }
-  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override { return new BrainDeformationPanel(scene, parent); }
+  QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
+  {
+    return new BrainDeformationPanel(scene, Configuration::loadOrDefaults(context.configurationFile), parent);
+  }
 };
 
 } // namespace brainshift

@@ -16,9 +16,10 @@
 
 namespace brainshift {
 
-BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
+BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& configuration, QWidget* parent)
   : QWidget(parent)
   , scene_(scene)
+  , configuration_(configuration)
 {
   mesh_ = new NodeSelector({NodeKind::Model}, {}, this);
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
@@ -27,7 +28,7 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, QWidget* parent)
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
   ranks_ = new QSpinBox(this);
   ranks_->setRange(1, 64);
-  ranks_->setValue(Configuration{}.ranks); // the product default, as the command line
+  ranks_->setValue(configuration_.ranks); // as the command line
   ranks_->setToolTip(tr("MPI ranks of the finite element solve"));
   controls_ = new StageRunControls(tr("Brain deformation"), this);
   boardReader_ = new QTimer(this);
@@ -108,6 +109,7 @@ struct DeformationInputs {
   std::string meshId, rigidId;
   int ranks = 1;
   std::filesystem::path worker;
+  Configuration configuration; ///< the surface's and the solve's parameters
 };
 
 using StageReport = std::function<void(const std::string&, double)>;
@@ -128,12 +130,12 @@ DeformationOutcome deformAndSolve(const DeformationInputs& in, CancelFlag cancel
   QElapsedTimer clock;
   clock.start();
   report("surface", 0.0);
-  ActiveSurfaceParameters surfaceParameters;
+  ActiveSurfaceParameters surfaceParameters = activeSurfaceParametersFrom(in.configuration);
   surfaceParameters.cancel = cancel;
   const ActiveSurfaceResult surface =
     deformBrainSurface(in.mesh, in.preop.GetPointer(), *in.intraopSegmentation, in.image.GetPointer(), *in.rigid, surfaceParameters);
   throwIfCancelled(cancel, "brain deformation");
-  const FiniteElementJob job = finiteElementJobFromModel(in.mesh, surface.surface, Configuration{}, "the mesh", "the brain surface");
+  const FiniteElementJob job = finiteElementJobFromModel(in.mesh, surface.surface, in.configuration, "the mesh", "the brain surface");
   FiniteElementRunOptions options;
   options.ranks = in.ranks;
   options.worker = in.worker;
@@ -208,6 +210,7 @@ void BrainDeformationPanel::run()
   inputs.meshId = meshNode->id();
   inputs.rigidId = transform->id();
   inputs.ranks = ranks_->value();
+  inputs.configuration = configuration_;
   inputs.worker = worker_.empty() ? workerBesideExecutable() : worker_;
   auto board = std::make_shared<ProgressBoard>();
   board_ = board;

@@ -8,6 +8,7 @@
 // Progress and Cancel: the surface stage reports no fraction (a busy bar) and stops at its next
 // iteration; the solve reports its stages and fractions, and Cancel stops the worker's ranks (the
 // solver terminates them). One flag, the run's (BackgroundRun.h), cancels both.
+#include "Configuration.h"
 #include "NodeSelector.h"
 #include "StageRunControls.h"
 
@@ -31,7 +32,8 @@ struct FiniteElementResult;
 class BrainDeformationPanel : public QWidget {
   Q_OBJECT
 public:
-  explicit BrainDeformationPanel(Scene& scene, QWidget* parent = nullptr);
+  /// The surface's and the solve's parameters and the ranks are `configuration`'s, as the command line's.
+  explicit BrainDeformationPanel(Scene& scene, const Configuration& configuration = Configuration{}, QWidget* parent = nullptr);
   ~BrainDeformationPanel() override;
 
   NodeSelector* meshSelector() const { return mesh_; }
@@ -72,6 +74,7 @@ private:
   void lockInputs(bool locked);
 
   Scene& scene_;
+  const Configuration configuration_;
   NodeSelector *mesh_, *preopLabels_, *intraopLabels_, *intraop_, *transform_;
   QSpinBox* ranks_;
   StageRunControls* controls_;

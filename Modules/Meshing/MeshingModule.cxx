@@ -12,7 +12,10 @@ class MeshingModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Meshing"); }
-  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override { return new MeshingPanel(scene, parent); }
+  QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
+  {
+    return new MeshingPanel(scene, Configuration::loadOrDefaults(context.configurationFile), parent);
+  }
 };
 
 } // namespace brainshift

@@ -11,9 +11,10 @@
 
 namespace brainshift {
 
-MeshingPanel::MeshingPanel(Scene& scene, QWidget* parent)
+MeshingPanel::MeshingPanel(Scene& scene, const Configuration& configuration, QWidget* parent)
   : QWidget(parent)
   , scene_(scene)
+  , defaults_(meshingParametersFrom(configuration))
 {
   labels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   labels_->setObjectName("labelsSelector");
@@ -21,8 +22,10 @@ MeshingPanel::MeshingPanel(Scene& scene, QWidget* parent)
   resolution_->setRange(0.5, 20.0);
   resolution_->setSingleStep(0.5);
   resolution_->setSuffix(" mm");
-  resolution_->setValue(MeshingParameters{}.resolutionMm);
-  tissues_ = new QLineEdit("2, 3, 4", this);
+  resolution_->setValue(defaults_.resolutionMm);
+  QStringList tissues;
+  for (int label : defaults_.labels) tissues << QString::number(label);
+  tissues_ = new QLineEdit(tissues.join(", "), this);
   tissues_->setToolTip(tr("The labels meshed: 2 parenchyma, 3 ventricles, 4 tumour"));
   controls_ = new StageRunControls(tr("Meshing"), this);
 
@@ -60,7 +63,7 @@ void MeshingPanel::run()
     controls_->setStatus(tr("Choose a label map first."));
     return;
   }
-  MeshingParameters parameters;
+  MeshingParameters parameters = defaults_;
   parameters.resolutionMm = resolution_->value();
   parameters.labels.clear();
   for (const QString& text : tissues_->text().split(QRegularExpression("[,\\s]+"), Qt::SkipEmptyParts)) {

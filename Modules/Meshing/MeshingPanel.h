@@ -4,6 +4,7 @@
 // stops the mesher between its phases); the mesh appears in the scene as the model
 // "mesh" (cell array Label, LPS mm, the preoperative frame), placed under the rigid transform when
 // the scene has one, as ../../../shared/CONTRACT.md's model frame says.
+#include "Configuration.h"
 #include "LabelMapMesher.h"
 #include "NodeSelector.h"
 #include "StageRunControls.h"
@@ -19,7 +20,8 @@ namespace brainshift {
 class MeshingPanel : public QWidget {
   Q_OBJECT
 public:
-  explicit MeshingPanel(Scene& scene, QWidget* parent = nullptr);
+  /// Its defaults (resolution, tissues, backend, grading) are `configuration`'s, as the command line's.
+  explicit MeshingPanel(Scene& scene, const Configuration& configuration = Configuration{}, QWidget* parent = nullptr);
   ~MeshingPanel() override;
 
   NodeSelector* labelsSelector() const { return labels_; }
@@ -45,6 +47,7 @@ private:
   void lockInputs(bool locked);
 
   Scene& scene_;
+  MeshingParameters defaults_; ///< the configuration's; the panel sets the resolution and tissues
   NodeSelector* labels_;
   QDoubleSpinBox* resolution_;
   QLineEdit* tissues_;

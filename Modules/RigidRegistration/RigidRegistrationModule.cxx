@@ -12,9 +12,9 @@ class RigidRegistrationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Rigid registration"); }
-  QWidget* createPanel(Scene& scene, const ModuleContext&, QWidget* parent) override
+  QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
-    return new RigidRegistrationPanel(scene, parent);
+    return new RigidRegistrationPanel(scene, Configuration::loadOrDefaults(context.configurationFile), parent);
   }
 };
 

@@ -9,9 +9,10 @@
 
 namespace brainshift {
 
-RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, QWidget* parent)
+RigidRegistrationPanel::RigidRegistrationPanel(Scene& scene, const Configuration& configuration, QWidget* parent)
   : QWidget(parent)
   , scene_(scene)
+  , parameters_(rigidRegistrationParametersFrom(configuration))
 {
   intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   intraop_->setObjectName("intraopSelector");

@@ -7,6 +7,7 @@
 // Cancel stops the registration at its next optimizer iteration (the run's cancel flag,
 // BackgroundRun.h); the panel is idle at once, and the cancelled run ends with nothing
 // (discardedRunFinished). The logic reports no progress fraction, so the bar is a busy bar.
+#include "Configuration.h"
 #include "NodeSelector.h"
 #include "RigidRegistrationLogic.h"
 #include "StageRunControls.h"
@@ -22,7 +23,8 @@ namespace brainshift {
 class RigidRegistrationPanel : public QWidget {
   Q_OBJECT
 public:
-  explicit RigidRegistrationPanel(Scene& scene, QWidget* parent = nullptr);
+  /// Its parameters start from `configuration`'s (the pyramid's levels, the samples), as the command line's.
+  explicit RigidRegistrationPanel(Scene& scene, const Configuration& configuration = Configuration{}, QWidget* parent = nullptr);
   ~RigidRegistrationPanel() override;
 
   NodeSelector* intraopSelector() const { return intraop_; }

@@ -15,6 +15,7 @@ namespace brainshift {
 TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleContext& context, QWidget* parent)
   : QWidget(parent)
   , scene_(scene)
+  , defaults_(classificationParametersFrom(Configuration::loadOrDefaults(context.configurationFile)))
 {
   intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   preopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
@@ -25,7 +26,7 @@ TissueClassificationPanel::TissueClassificationPanel(Scene& scene, const ModuleC
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
   k_ = new QSpinBox(this);
   k_->setRange(1, 101);
-  k_->setValue(int(TissueClassificationParameters{}.k));
+  k_->setValue(int(defaults_.k));
   pickTissue_ = new QComboBox(this);
   for (LabelPixel label = 0; label <= 4; ++label) pickTissue_->addItem(QString::fromStdString(tissueName(label)), int(label));
   pickTissue_->setCurrentIndex(2);
@@ -132,7 +133,7 @@ void TissueClassificationPanel::run()
     controls_->setStatus(tr("Choose the intraoperative volume, the preoperative labels and the rigid transform first."));
     return;
   }
-  TissueClassificationParameters parameters;
+  TissueClassificationParameters parameters = defaults_;
   parameters.k = unsigned(k_->value());
   parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
   // The worker's own references (see BackgroundRun.h); the list is copied.

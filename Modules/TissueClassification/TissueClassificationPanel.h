@@ -6,6 +6,7 @@
 // (the radiologist's correction); a run with a list uses exactly the list. The result appears in
 // the scene as the label map "intraop labels" (role intraop). Runs off the GUI thread
 // (BackgroundRun.h: Cancel stops the classification within 65,536 voxels of its k-NN).
+#include "Configuration.h"
 #include "ModulePlugin.h"
 #include "NodeSelector.h"
 #include "StageRunControls.h"
@@ -60,6 +61,7 @@ private:
   void showPrototypeCounts();
 
   Scene& scene_;
+  TissueClassificationParameters defaults_; ///< the configuration's (ModuleContext::configurationFile); the panel sets k
   NodeSelector *intraop_, *preopLabels_, *preopImage_, *transform_;
   QComboBox* pickTissue_;
   QPushButton *pick_, *clear_;

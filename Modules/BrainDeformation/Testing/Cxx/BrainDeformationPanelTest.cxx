@@ -16,6 +16,7 @@
 #include <QProgressBar>
 #include <QPushButton>
 #include <QSignalSpy>
+#include <QSpinBox>
 
 #include <filesystem>
 #include <fstream>
@@ -40,6 +41,11 @@ int BrainDeformationPanelTest(int argc, char* argv[])
     scene.add(ScalarVolumeNode::create("intraop image", c.intraopImage));
     auto rigid = scene.add(TransformNode::create("rigid intraop_to_preop", c.rigidIntraopToPreop));
     BrainDeformationPanel panel(scene);
+    // The ranks (and the surface's and the solve's parameters) are the configuration's.
+    BS_CHECK(panel.ranksBox()->value() == Configuration{}.ranks);
+    Configuration threeRanks;
+    threeRanks.ranks = 3;
+    BS_CHECK(BrainDeformationPanel(scene, threeRanks).ranksBox()->value() == 3);
     BS_CHECK(panel.intraopLabelsSelector()->setCurrentNodeId(QString::fromStdString(intraopLabels->id())));
     QSignalSpy finished(&panel, &BrainDeformationPanel::runFinished);
     QSignalSpy discarded(&panel, &BrainDeformationPanel::discardedRunFinished);

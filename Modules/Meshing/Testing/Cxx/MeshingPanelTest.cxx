@@ -37,6 +37,15 @@ int MeshingPanelTest(int argc, char* argv[])
     }
     Scene scene;
     MeshingPanel panel(scene);
+    // The defaults are the command line's, from the one configuration (4 mm; the panel used to
+    // mesh at 3); another configuration's reach the panel.
+    BS_CHECK_MSG(panel.resolutionBox()->value() == Configuration{}.meshResolutionMm, panel.resolutionBox()->value());
+    BS_CHECK(panel.tissuesEdit()->text() == "2, 3, 4");
+    Configuration coarse;
+    coarse.meshResolutionMm = 6.0;
+    coarse.meshLabels = {2, 3};
+    const MeshingPanel configured(scene, coarse);
+    BS_CHECK(configured.resolutionBox()->value() == 6.0 && configured.tissuesEdit()->text() == "2, 3");
     auto rigid = scene.add(TransformNode::create("rigid intraop_to_preop", testing::makeRigidTransform().GetPointer()));
     auto labelNode = scene.add(LabelMapVolumeNode::create("preop labels", labels));
     BS_CHECK(panel.labelsSelector()->currentNode() == labelNode);
