@@ -26,10 +26,6 @@ struct ViewLayers {
 
 /// What the host offers a panel besides the scene.
 struct ModuleContext {
-  /// The configuration file the host was given (`brainshift-host --config`, checked at start), the
-  /// one `register --config` reads: each stage panel takes its defaults from it through the same
-  /// function as the command line (Configuration::loadOrDefaults). Empty: the product's defaults.
-  std::string configurationFile;
   /// Moves the views' cursor (and so the slices) to a point, LPS mm. May be empty (no views).
   std::function<void(const std::array<double, 3>& lps)> showPoint;
   /// Calls `onPick` with every point the user picks in a slice view (LPS mm), for as long as
@@ -37,6 +33,10 @@ struct ModuleContext {
   std::function<void(QObject* receiver, std::function<void(const std::array<double, 3>& lps)> onPick)> subscribeToPicks;
   /// Shows these layers in the slice views (the host's Data panel follows). May be empty (no views).
   std::function<void(const ViewLayers& layers)> showLayers;
+  /// The configuration file the host was given (`brainshift-host --config`, checked at start), the
+  /// one `register --config` reads: each stage panel takes its defaults from it through the same
+  /// function as the command line (Configuration::loadOrDefaults). Empty: the product's defaults.
+  std::string configurationFile;
 };
 
 class ModulePlugin {
@@ -50,5 +50,5 @@ public:
 
 } // namespace brainshift
 
-#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.2"
+#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.3"
 Q_DECLARE_INTERFACE(brainshift::ModulePlugin, BrainShiftModulePlugin_iid)

@@ -175,7 +175,8 @@ void printEvaluationAgainstTruth(const json& evaluation)
                 "(from the shown boundary %.2f / %.2f mm; both ways %.2f mm); rigid %.2f / %.2f mm; surface nodes %.2f / %.2f mm\n",
                 b["radius_mm"].get<double>(), s["brainshift"]["mean_abs_mm"].get<double>(), s["brainshift"]["p95_abs_mm"].get<double>(),
                 s["brainshift"]["from_shown"]["mean_abs_mm"].get<double>(), s["brainshift"]["from_shown"]["p95_abs_mm"].get<double>(),
-                s["brainshift"]["symmetric_mean_abs_mm"].get<double>(), rigid["mean_abs_mm"].get<double>(), rigid["p95_abs_mm"].get<double>(),
+                s["brainshift"].value("symmetric_mean_abs_mm", json()).is_number() ? s["brainshift"]["symmetric_mean_abs_mm"].get<double>() : std::nan(""),
+                rigid["mean_abs_mm"].get<double>(), rigid["p95_abs_mm"].get<double>(),
                 n.value("mean_abs_mm", 0.0), n.value("p95_abs_mm", 0.0));
   }
   if (evaluation.contains("uncertainty")) {

@@ -12,6 +12,8 @@
 
 #include <vtkPolyData.h>
 
+#include <cmath>
+
 #include <utility>
 
 namespace brainshift {
@@ -84,7 +86,8 @@ json shownBoundaryJson(const CraniotomyBoundaryEvaluation::ShownBoundary& b)
 {
   json entry = boundaryDistancesJson(b.toShown);
   entry["from_shown"] = boundaryDistancesJson(b.toTrue);
-  entry["symmetric_mean_abs_mm"] = b.symmetricMeanAbsMm();
+  const double both = b.symmetricMeanAbsMm();
+  entry["symmetric_mean_abs_mm"] = std::isfinite(both) ? json(both) : json(nullptr); // null: a direction unmeasured
   return entry;
 }
 

@@ -146,7 +146,7 @@ void readClassification(const json& c, const std::string& file, Configuration& c
 {
   if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
   requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
-                      "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look"},
+                      "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look", "tumour_second_look"},
                    file + ": classification");
   if (c.contains("tumour_resected")) {
     if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
@@ -172,7 +172,8 @@ void readClassification(const json& c, const std::string& file, Configuration& c
   if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
   readFlags(c, {{"bias_correction", &configuration.classificationBiasCorrection},
                 {"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
-                {"tumour_fluid_by_look", &configuration.classificationTumourFluidByLook}},
+                {"tumour_fluid_by_look", &configuration.classificationTumourFluidByLook},
+                {"tumour_second_look", &configuration.classificationTumourSecondLook}},
             file + ": classification");
 }
 

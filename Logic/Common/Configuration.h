@@ -51,10 +51,15 @@ struct Configuration {
   bool classificationTumourFluidByLook = true;
   /// "auto" (decided from the image where the aligned tumour lies), "yes" or "no".
   std::string classificationTumourResected = "auto";
+  /// A tumour kept in place by the image is looked at again where the first solve put it (the
+  /// refine stage, whatever its passes): resected there, the scan is classified, fitted and solved
+  /// once more (resectionShownWhereSolved). False: the first decision stands.
+  bool classificationTumourSecondLook = true;
   /// Passes of the classification that follows the brain (Warfield et al.'s adaptive template):
   /// after a solve the preoperative labels warped by it become the spatial prior, and the
   /// classification, the surface and the solve run again, at most this many times more, until the
-  /// imposed surface displacement changes by less than the tolerance (mean over its nodes).
+  /// imposed surface displacement changes by less than the tolerance (mean over its nodes). (Before
+  /// them, and with none, the tumour's second look may run one pass: classificationTumourSecondLook.)
   /// Empty: "auto", one pass where the scan's fluid is brighter than its parenchyma (T2-like: the
   /// classification's own rule for the gap under the craniotomy measures fluid thickness over the
   /// aligned preoperative brain only in T1-like scans, and the warped prior takes its place), none

@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <vector>
 
@@ -321,8 +322,9 @@ std::size_t CraniotomyBoundaryEvaluation::trueBoundaryPoints() const { return d-
 
 double CraniotomyBoundaryEvaluation::ShownBoundary::symmetricMeanAbsMm() const
 {
-  const std::size_t points = toShown.points + toTrue.points;
-  return points ? (toShown.meanAbsMm * double(toShown.points) + toTrue.meanAbsMm * double(toTrue.points)) / double(points) : 0.0;
+  if (toShown.points == 0 || toTrue.points == 0) return std::numeric_limits<double>::quiet_NaN(); // one way unmeasured
+  const double points = double(toShown.points + toTrue.points);
+  return (toShown.meanAbsMm * double(toShown.points) + toTrue.meanAbsMm * double(toTrue.points)) / points;
 }
 
 CraniotomyBoundaryEvaluation::ShownBoundary CraniotomyBoundaryEvaluation::shownBoundary(const SpatialTransform& intraopToPreop) const

@@ -91,7 +91,8 @@ public:
   /// outside the true brain).
   struct ShownBoundary {
     BoundaryDistances toShown, toTrue;
-    /// Both directions' distances together (the average symmetric surface distance).
+    /// Both directions' distances together (the average symmetric surface distance); NaN when
+    /// either direction has no points (no shown boundary under the craniotomy: not measured).
     double symmetricMeanAbsMm() const;
   };
   ShownBoundary shownBoundary(const SpatialTransform& intraopToPreop) const;

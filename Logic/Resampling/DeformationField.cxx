@@ -98,13 +98,33 @@ struct MeshNodes {
   std::vector<Vec> undeformed, deformedIndex;
 };
 
-void checkFieldInputs(vtkDataArray* displacement, const SpatialTransform& rigid, const DeformationFieldParameters& parameters,
-                      const std::string& meshName)
+/// A solved mesh's displacement and a linear rigid transform, else InputError naming the mesh.
+void requireSolvedMeshAndLinearRigid(vtkDataArray* displacement, const SpatialTransform& rigid, const std::string& meshName)
 {
   if (!displacement || displacement->GetNumberOfComponents() != 3) {
     throw InputError(meshName + ": no point array \"Displacement\"; run `brainshift simulate` on this output folder first");
   }
   if (!isLinearTransform(&rigid)) throw InputError("the rigid transform is not linear");
+}
+
+/// Calls visit(cell, v) for each tetrahedron of the mesh (v its four point ids); InputError naming
+/// the mesh for another cell.
+template <class Visit>
+void forEachTetrahedron(vtkUnstructuredGrid* mesh, const std::string& meshName, Visit&& visit)
+{
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    mesh->GetCellPoints(c, ids);
+    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
+    const vtkIdType v[4] = {ids->GetId(0), ids->GetId(1), ids->GetId(2), ids->GetId(3)};
+    visit(c, v);
+  }
+}
+
+void checkFieldInputs(vtkDataArray* displacement, const SpatialTransform& rigid, const DeformationFieldParameters& parameters,
+                      const std::string& meshName)
+{
+  requireSolvedMeshAndLinearRigid(displacement, rigid, meshName);
   if (!(parameters.fallbackSigmaMm > 0) || parameters.fallbackSigmaMm > 100) {
     throw InputError("warp: the fallback width must be within 0 to 100 mm");
   }
@@ -205,13 +225,7 @@ VoxelCorrection correctionInsideDeformedMesh(vtkUnstructuredGrid* mesh, vtkDataA
   VoxelCorrection result;
   result.w.assign(3 * voxels, 0.0f);
   result.located.assign(voxels, 0);
-  vtkNew<vtkIdList> ids;
-  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
-    mesh->GetCellPoints(c, ids);
-    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
-    const vtkIdType v[4] = {ids->GetId(0), ids->GetId(1), ids->GetId(2), ids->GetId(3)};
-    rasteriseDeformedTetrahedron(v, nodes, displacement, lattice, result);
-  }
+  forEachTetrahedron(mesh, meshName, [&](vtkIdType, const vtkIdType v[4]) { rasteriseDeformedTetrahedron(v, nodes, displacement, lattice, result); });
   return result;
 }
 
@@ -572,28 +586,21 @@ MaskImage::Pointer voxelsOfDeformedTissue(vtkUnstructuredGrid* mesh, LabelPixel 
                                           const ImageGeometry& grid, const std::string& meshName)
 {
   vtkDataArray* displacement = mesh->GetPointData()->GetArray("Displacement");
-  if (!displacement || displacement->GetNumberOfComponents() != 3) {
-    throw InputError(meshName + ": no point array \"Displacement\"; run `brainshift simulate` on this output folder first");
-  }
+  requireSolvedMeshAndLinearRigid(displacement, rigidIntraopToPreop, meshName);
   vtkDataArray* labels = mesh->GetCellData()->GetArray("Label");
   if (!labels) throw InputError(meshName + ": no cell array \"Label\"");
-  if (!isLinearTransform(&rigidIntraopToPreop)) throw InputError("the rigid transform is not linear");
   const GridMaps maps = gridMapsOf(rigidIntraopToPreop, grid);
   const VoxelLattice lattice(grid);
   const MeshNodes nodes = meshNodesOf(mesh, displacement, maps, meshName);
   MaskImage::Pointer mask = grid.allocate<MaskImage>();
   unsigned char* m = mask->GetBufferPointer();
   std::fill_n(m, grid.numberOfVoxels(), 0);
-  vtkNew<vtkIdList> ids;
-  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
-    if (std::lround(labels->GetComponent(c, 0)) != long(label)) continue;
-    mesh->GetCellPoints(c, ids);
-    if (ids->GetNumberOfIds() != 4) throw InputError(meshName + ": cell " + std::to_string(c) + " is not a tetrahedron");
-    const vtkIdType v[4] = {ids->GetId(0), ids->GetId(1), ids->GetId(2), ids->GetId(3)};
+  forEachTetrahedron(mesh, meshName, [&](vtkIdType c, const vtkIdType v[4]) {
+    if (std::lround(labels->GetComponent(c, 0)) != long(label)) return;
     forEachVoxelInTetrahedron(
       deformedCorners(v, nodes), lattice, [&](std::size_t at) { return m[at] != 0; },
       [&](std::size_t at, const std::array<double, 4>&) { m[at] = 1; });
-  }
+  });
   return mask;
 }
 

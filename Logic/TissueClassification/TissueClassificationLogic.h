@@ -104,8 +104,8 @@ bool decideTumourResection(const TumourResectionEvidence& evidence, TumourResect
 /// the parenchyma that sank into it; where the solve put the tumour, a cavity shows. Resected when
 /// the vote says so and air shows in it: a cavity under an open craniotomy holds air at its top,
 /// no tumour does, while a necrotic or cystic tumour's core looks like fluid (measured on the
-/// built-in scenarios: 10-36 % air where the tumour was resected, at most 4 % where it was not,
-/// and 30-54 % fluid-like in tumours left in place). A cavity filled with saline alone is not told
+/// built-in scenarios: 9-15 % air where the tumour was resected, at most 2 % where it was not,
+/// and 28-49 % fluid-like in tumours left in place). A cavity filled with saline alone is not told
 /// from a cystic tumour: it stays in place unless the user says otherwise.
 bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved);
 

@@ -12,6 +12,7 @@
 #include "VolumeIO.h"
 #include "WarpedPriorRefinement.h"
 
+#include <vtkCellData.h>
 #include <vtkDataArray.h>
 #include <vtkPointData.h>
 #include <vtkPolyData.h>
@@ -118,19 +119,34 @@ struct WarpedPrior {
 constexpr double MovedMm = 1.0;
 
 /// The preoperative labels warped onto the intraoperative grid by the solved mesh.
+/// The solved mesh (with its Displacement) and the rigid transform, as the earlier stages wrote them.
+struct SolvedMesh {
+  fs::path meshFile;
+  vtkSmartPointer<vtkUnstructuredGrid> mesh;
+  SpatialTransform::Pointer rigid;
+};
+
+SolvedMesh solvedMeshAndRigid(RunContext& context)
+{
+  SolvedMesh solved{context.output("mesh.vtu"), nullptr, nullptr};
+  const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm");
+  solved.mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(solved.meshFile));
+  if (!solved.mesh) throw InputError(solved.meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
+  if (!solved.mesh->GetPointData()->GetArray("Displacement")) {
+    throw InputError(solved.meshFile.string() + ": no Displacement; run `brainshift simulate` on this output folder first");
+  }
+  solved.rigid = readTransform(rigidFile);
+  if (!isLinearTransform(solved.rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
+  return solved;
+}
+
 WarpedPrior labelsWarpedBySolve(RunContext& context, double reachMm)
 {
-  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
-  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-  if (!mesh->GetPointData()->GetArray("Displacement")) {
-    throw InputError(meshFile.string() + ": no Displacement; run `brainshift simulate` on this output folder first");
-  }
-  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
-  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
-  const DeformationField deformation = intraopToPreopField(mesh, *rigid, ImageGeometry::of(&context.intraopImage("refine")),
-                                                           DeformationFieldParameters{}, meshFile.string());
-  return {warpLabelVolume(context.preopLabels("refine"), *deformation.field), reachMm > 0 ? regionMovedBySolve(*deformation.field, *rigid, MovedMm, reachMm) : nullptr};
+  const SolvedMesh solved = solvedMeshAndRigid(context);
+  const DeformationField deformation = intraopToPreopField(solved.mesh, *solved.rigid, ImageGeometry::of(&context.intraopImage("refine")),
+                                                           DeformationFieldParameters{}, solved.meshFile.string());
+  return {warpLabelVolume(context.preopLabels("refine"), *deformation.field),
+          reachMm > 0 ? regionMovedBySolve(*deformation.field, *solved.rigid, MovedMm, reachMm) : nullptr};
 }
 
 /// The passes to run: the configured number, or ("auto") one where the first classification
@@ -188,7 +204,7 @@ struct FirstPass {
       const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
       const std::string by = evidence.is_object() ? evidence.value("decided_by", std::string()) : std::string();
       tumourDecision = RunContext::HeldTumourDecision{classify["tumour_resected"].get<bool>(),
-                                                      by == "image" ? "the first classification (through the rigid prior)" : by};
+                                                      by == "image" || by.empty() ? "the first classification (through the rigid prior)" : by};
     }
   }
   void restateIn(RunReport& report) const
@@ -258,13 +274,26 @@ double numberOr(const nlohmann::json& object, const char* key, double otherwise)
   return object.is_object() && object.contains(key) && object[key].is_number() ? object[key].get<double>() : otherwise;
 }
 
+/// Whether any tetrahedron of `mesh` has this label (cell array "Label").
+bool meshHolds(vtkUnstructuredGrid* mesh, LabelPixel label)
+{
+  vtkDataArray* labels = mesh->GetCellData()->GetArray("Label");
+  for (vtkIdType c = 0; labels && c < labels->GetNumberOfTuples(); ++c) {
+    if (std::lround(labels->GetComponent(c, 0)) == long(label)) return true;
+  }
+  return false;
+}
+
 TumourWhereSolved checkTumourWhereSolved(RunContext& context)
 {
   Stopwatch clock;
   TumourWhereSolved check;
   const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
   const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
-  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || classify.value("tumour_resected", true)) return check;
+  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || classify.value("tumour_resected", true) ||
+      !context.configuration().classificationTumourSecondLook) {
+    return check;
+  }
   auto notChecked = [&](const std::string& why) {
     check.entry = {{"checked", false}, {"why_not", why}};
     return check;
@@ -280,14 +309,12 @@ TumourWhereSolved checkTumourWhereSolved(RunContext& context)
   contrast.air = numberOr(contrastEntry, "air_median", nan);
   contrast.fluid = numberOr(contrastEntry, "fluid_median", nan);
   contrast.parenchyma = numberOr(contrastEntry, "parenchyma_median", nan);
-  const fs::path meshFile = context.output("mesh.vtu"), rigidFile = context.output("rigid_intraop_to_preop.tfm");
-  vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
-  if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-  const SpatialTransform::Pointer rigid = readTransform(rigidFile);
-  if (!isLinearTransform(rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
-  const ScalarImage& intraop = context.intraopImage("refine");
+  const SolvedMesh solved = solvedMeshAndRigid(context);
   constexpr LabelPixel tumourLabel = 4; // ../shared/CONTRACT.md
-  const MaskImage::Pointer where = voxelsOfDeformedTissue(mesh, tumourLabel, *rigid, ImageGeometry::of(&intraop), meshFile.string());
+  if (!meshHolds(solved.mesh, tumourLabel)) return notChecked("the mesh holds no tumour (mesh.labels)");
+  const ScalarImage& intraop = context.intraopImage("refine");
+  const MaskImage::Pointer where =
+    voxelsOfDeformedTissue(solved.mesh, tumourLabel, *solved.rigid, ImageGeometry::of(&intraop), solved.meshFile.string());
   std::vector<float> intensities;
   const unsigned char* m = where->GetBufferPointer();
   const float* v = intraop.GetBufferPointer();
@@ -319,19 +346,19 @@ TumourWhereSolved checkTumourWhereSolved(RunContext& context)
 /// surface fitted and solved again on it.
 void runTumourDecisionPass(RunContext& context, bool resected)
 {
+  struct Held { // cleared however the pass ends
+    RunContext& context;
+    ~Held()
+    {
+      context.holdTumourDecision(std::nullopt);
+      context.setRepeatPass(false);
+    }
+  } held{context};
   context.holdTumourDecision(RunContext::HeldTumourDecision{resected, "the tumour where the first solve put it"});
   context.setRepeatPass(true);
-  try {
-    runClassifyStage(context);
-    runSurfaceStage(context);
-    runSimulateStage(context);
-  } catch (...) {
-    context.holdTumourDecision(std::nullopt);
-    context.setRepeatPass(false);
-    throw;
-  }
-  context.holdTumourDecision(std::nullopt);
-  context.setRepeatPass(false);
+  runClassifyStage(context);
+  runSurfaceStage(context);
+  runSimulateStage(context);
 }
 
 } // namespace

@@ -80,7 +80,10 @@ def boundary_of(evaluation, key):
     return {"craniotomy_boundary_mm": b["mean_abs_mm"], "craniotomy_boundary_p95_mm": b["p95_abs_mm"],
             "craniotomy_boundary_signed_mm": b["signed_mean_mm"],
             "craniotomy_boundary_from_shown_mm": (b.get("from_shown") or {}).get("mean_abs_mm"),
-            "craniotomy_boundary_both_ways_mm": b.get("symmetric_mean_abs_mm")}
+            # null where a direction has no points: not met (inf), not the other direction alone
+            "craniotomy_boundary_both_ways_mm": (None if "symmetric_mean_abs_mm" not in b
+                                                 else float("inf") if b["symmetric_mean_abs_mm"] is None
+                                                 else b["symmetric_mean_abs_mm"])}
 
 
 def boundary_judged(r):

@@ -12,8 +12,8 @@ so does a steep wall a little misplaced.
 
     shown_boundary_along_axis.py RUN_DIR ...
 
-prints per run: lines, signed mean, mean |d| and p95 |d| in mm, and the same within 10, 20, 25 and 30 mm
-of the axis. Needs numpy, scipy and nibabel.
+prints per run: lines, signed mean, mean |d| and p95 |d| in mm, and the same in the rings 0-10, 10-20,
+20-25 and 25-30 mm from the axis. Needs numpy, scipy and nibabel.
 """
 import os
 import re

@@ -49,6 +49,13 @@ int TissueClassificationTumourDecisionTest(int, char*[])
     BS_CHECK(decideTumourResection(necrotic, TumourResection::Auto)); // the vote alone would say resected
     BS_CHECK(!resectionShownWhereSolved(necrotic));
     BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{20.0f, 100}}), scan, 1.0, TumourResection::Auto)));
+    // The air's bound: the vote says resected both times (40 % fluid or air); 3 % air is not a
+    // cavity's sign, 6 % is.
+    const TumourResectionEvidence littleAir = tumourResectionEvidenceOf(voxels({{21.0f, 37}, {2.0f, 3}, {70.0f, 60}}), scan, 1.0, TumourResection::Auto);
+    const TumourResectionEvidence someAir = tumourResectionEvidenceOf(voxels({{21.0f, 34}, {2.0f, 6}, {70.0f, 60}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK(decideTumourResection(littleAir, TumourResection::Auto) && decideTumourResection(someAir, TumourResection::Auto));
+    BS_CHECK(!resectionShownWhereSolved(littleAir));
+    BS_CHECK(resectionShownWhereSolved(someAir));
     BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{68.0f, 97}, {2.0f, 3}}), scan, 1.0, TumourResection::Auto)));
     // A hypointense tumour (0.4 of the way to the parenchyma) in place, with a little air beside it.
     const TumourResectionEvidence hypointense =
