@@ -34,8 +34,8 @@ void saveScreenshot(QWidget& window, const QString& file, bool ok)
 
 /// The Intraoperative update module on a case (ScriptedSession.h); false when it is not loaded.
 bool startSession(brainshift::HostMainWindow& window, const QString& preopImage, const QString& preopLabels,
-                  const QStringList& overlays, const QString& folder, bool replace, const QStringList& scans,
-                  std::function<void(bool)> done)
+                  const QStringList& overlays, const QString& folder, const QString& configuration, bool replace,
+                  const QStringList& scans, std::function<void(bool)> done)
 {
   if (!window.selectModule("Intraoperative update")) {
     std::fprintf(stderr, "brainshift-host: the Intraoperative update module is not loaded\n");
@@ -43,7 +43,7 @@ bool startSession(brainshift::HostMainWindow& window, const QString& preopImage,
   }
   QWidget* panel = window.currentPanel();
   QMetaObject::invokeMethod(panel, "setCase", Q_ARG(QString, preopImage), Q_ARG(QString, preopLabels), Q_ARG(QStringList, overlays),
-                            Q_ARG(QString, folder), Q_ARG(QString, QString()));
+                            Q_ARG(QString, folder), Q_ARG(QString, configuration));
   QMetaObject::invokeMethod(panel, "setReplaceEarlierSession", Q_ARG(bool, replace));
   new brainshift::ScriptedSession(panel, scans, std::move(done)); // owned by the panel
   QMetaObject::invokeMethod(panel, "prepareCase");
@@ -99,7 +99,8 @@ int main(int argc, char* argv[])
   window.show();
   const bool session = parser.isSet(preopImage);
   if (session && !startSession(window, parser.value(preopImage), parser.value(preopLabels), parser.values(overlay),
-                               parser.value(sessionDir), parser.isSet(replaceSession), parser.values(scan), [&](bool ok) {
+                               parser.value(sessionDir), parser.value(config), parser.isSet(replaceSession), parser.values(scan),
+                               [&](bool ok) {
                                  loaded = loaded && ok;
                                  if (parser.isSet(screenshot)) saveScreenshot(window, parser.value(screenshot), loaded);
                                })) {

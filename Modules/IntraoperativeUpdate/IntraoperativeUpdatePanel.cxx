@@ -127,6 +127,7 @@ void IntraoperativeUpdatePanel::buildCaseGroup()
   overlays_->setPlaceholderText(tr("NAME=FILE; ... (fMRI statistics, MRA)"));
   form->addRow(tr("Overlays"), overlays_);
   config_ = pathField(group, form, tr("Configuration (optional)"), false, tr("JSON (*.json)"));
+  config_->setText(QString::fromStdString(context_.configurationFile)); // the host's, as the stage panels take it
   outputFolder_ = pathField(group, form, tr("Session folder"), true);
   replaceEarlier_ = new QCheckBox(tr("Replace an earlier session in this folder"), group);
   form->addRow(replaceEarlier_);

@@ -53,6 +53,8 @@ public:
   void setPollMilliseconds(int milliseconds);
 
   QPushButton* prepareButton() const { return prepare_; }
+  /// The case's configuration file: the host's (`--config`, ModuleContext) until the user sets another.
+  QLineEdit* configurationField() const { return config_; }
   QPushButton* watchButton() const { return watch_; }
   QPushButton* cancelButton() const { return cancel_; }
   QProgressBar* progressBar() const { return progress_; }

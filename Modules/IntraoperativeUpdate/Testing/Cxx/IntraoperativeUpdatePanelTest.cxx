@@ -16,6 +16,7 @@
 #include <QComboBox>
 #include <QProgressBar>
 #include <QPushButton>
+#include <QLineEdit>
 #include <QSignalSpy>
 #include <QSurfaceFormat>
 #include <QTableWidget>
@@ -83,6 +84,13 @@ int IntraoperativeUpdatePanelTest(int argc, char* argv[])
       views.updateLayers();
     };
     IntraoperativeUpdatePanel panel(scene, context);
+    BS_CHECK(panel.configurationField()->text().isEmpty());
+    {
+      ModuleContext configured;
+      configured.configurationFile = "/cases/or-3.json";
+      const IntraoperativeUpdatePanel withHostConfiguration(scene, configured); // the host's --config, offered
+      BS_CHECK(withHostConfiguration.configurationField()->text() == "/cases/or-3.json");
+    }
     QSignalSpy prepared(&panel, &IntraoperativeUpdatePanel::prepared);
     QSignalSpy finished(&panel, &IntraoperativeUpdatePanel::scanFinished);
 
