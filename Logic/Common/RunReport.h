@@ -20,6 +20,8 @@ public:
   void setStage(const std::string& stage, const nlohmann::json& figures);
   bool hasStage(const std::string& stage) const;
   const nlohmann::json& stage(const std::string& stage) const;
+  /// The stage's entry, or an empty object when the stage has not run.
+  nlohmann::json stageOrEmpty(const std::string& stage) const { return hasStage(stage) ? this->stage(stage) : nlohmann::json::object(); }
 
   /// Sets a top-level entry other than the stages (e.g. "case", "brainshift_version").
   void set(const std::string& key, const nlohmann::json& value);

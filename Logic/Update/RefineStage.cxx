@@ -157,7 +157,7 @@ std::pair<unsigned, std::string> refinementPasses(RunContext& context)
   if (configured) return {*configured, "configured"};
   // What the first classification learned of this scan's contrast (its prototypes' medians), as
   // ScanContrast::fluidBrighterThanParenchyma decides it.
-  const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+  const nlohmann::json classify = context.report().stageOrEmpty("classify");
   const nlohmann::json contrast = classify.value("contrast", nlohmann::json::object());
   const bool known = contrast.contains("fluid_median") && contrast["fluid_median"].is_number() &&
                      contrast.contains("parenchyma_median") && contrast["parenchyma_median"].is_number();
@@ -189,16 +189,15 @@ struct FirstPass {
 
   explicit FirstPass(RunContext& context)
   {
-    auto stage = [&](const char* name) { return context.report().hasStage(name) ? context.report().stage(name) : nlohmann::json::object(); };
-    surface = stage("surface");
-    simulate = stage("simulate");
+    surface = context.report().stageOrEmpty("surface");
+    simulate = context.report().stageOrEmpty("simulate");
     takeClassification(context);
   }
   /// The classification the passes keep: the first's, or the tumour decision pass's.
   void takeClassification(RunContext& context)
   {
     anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
-    const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+    const nlohmann::json classify = context.report().stageOrEmpty("classify");
     tumourDecision.reset();
     if (classify.contains("tumour_resected") && classify["tumour_resected"].is_boolean()) {
       const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
@@ -288,7 +287,7 @@ TumourWhereSolved checkTumourWhereSolved(RunContext& context)
 {
   Stopwatch clock;
   TumourWhereSolved check;
-  const nlohmann::json classify = context.report().hasStage("classify") ? context.report().stage("classify") : nlohmann::json::object();
+  const nlohmann::json classify = context.report().stageOrEmpty("classify");
   const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
   if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || classify.value("tumour_resected", true) ||
       !context.configuration().classificationTumourSecondLook) {

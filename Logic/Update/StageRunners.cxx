@@ -204,6 +204,16 @@ nlohmann::json scanContrastJson(const ScanContrast& c, const IntensityScale& sca
           {"scale_high", scale.high}};
 }
 
+/// Whether the previous scan's classify entry holds `key` as true (false without a previous scan,
+/// or for an entry of another shape).
+bool previousClassifySaid(const RunContext& context, const char* key)
+{
+  const nlohmann::json& previous = context.previousReport();
+  if (!previous.contains("stages") || !previous["stages"].contains("classify")) return false;
+  const nlohmann::json& classify = previous["stages"]["classify"];
+  return classify.is_object() && classify.contains(key) && classify[key].is_boolean() && classify[key].get<bool>();
+}
+
 /// The tumour decision the classification takes instead of its own, when it would decide by the
 /// image: the refine stage's (held in the context), else a resection an earlier scan of this case
 /// found (a tumour resected stays resected; its cavity at a later, larger shift may sit where
@@ -212,12 +222,7 @@ std::optional<RunContext::HeldTumourDecision> tumourDecisionToHold(const RunCont
 {
   if (parameters.tumourResection != TumourResection::Auto) return std::nullopt;
   if (context.heldTumourDecision()) return context.heldTumourDecision();
-  const nlohmann::json& previous = context.previousReport();
-  const nlohmann::json* classify = previous.contains("stages") && previous["stages"].contains("classify") ? &previous["stages"]["classify"] : nullptr;
-  if (classify && classify->is_object() && classify->contains("tumour_resected") && (*classify)["tumour_resected"].is_boolean() &&
-      (*classify)["tumour_resected"].get<bool>()) {
-    return RunContext::HeldTumourDecision{true, "an earlier scan of this case (resected there)"};
-  }
+  if (previousClassifySaid(context, "tumour_resected")) return RunContext::HeldTumourDecision{true, "an earlier scan of this case (resected there)"};
   return std::nullopt;
 }
 } // namespace
@@ -242,12 +247,7 @@ void runClassifyStage(RunContext& context)
   if (!context.options().prototypes.empty()) {
     prototypesFile = context.options().prototypes;
   } else {
-    const nlohmann::json& previous = context.previousReport();
-    const bool previousWereGiven = previous.contains("stages") && previous["stages"].contains("classify") &&
-                                   previous["stages"]["classify"].is_object() &&
-                                   previous["stages"]["classify"].contains("prototypes_given") &&
-                                   previous["stages"]["classify"]["prototypes_given"] == true;
-    if (previousWereGiven) prototypesFile = context.previousFile("classification_prototypes.json");
+    if (previousClassifySaid(context, "prototypes_given")) prototypesFile = context.previousFile("classification_prototypes.json");
   }
   if (prototypesFile) prototypes = readPrototypes(*prototypesFile);
   const Configuration& configuration = context.configuration();
