@@ -44,6 +44,37 @@ PhysicalPoint preopOf(const PhysicalPoint& p) // X with X + A X + b = p: (I + A)
   }
   return x;
 }
+
+/// Where the solve put a tissue: the voxels the deformed tetrahedra of its label hold. Every
+/// tetrahedron is brain here, so they are the voxels the field located in the mesh (`meshVoxels`);
+/// well inside the displaced box all of them, outside it none; another label holds none.
+void checkTissueWhereSolved(vtkUnstructuredGrid* mesh, const itk::Euler3DTransform<double>& rigid, const ImageGeometry& grid,
+                            std::size_t meshVoxels)
+{
+  const MaskImage::Pointer brainWhereSolved = voxelsOfDeformedTissue(mesh, 2, rigid, grid, "mesh.vtu");
+  BS_CHECK(ImageGeometry::of(brainWhereSolved.GetPointer()).sameGridAs(grid));
+  std::size_t inMask = 0, wellInsideMissed = 0, outsideTaken = 0;
+  itk::ImageRegionConstIteratorWithIndex<MaskImage> m(brainWhereSolved, brainWhereSolved->GetLargestPossibleRegion());
+  for (; !m.IsAtEnd(); ++m) {
+    PhysicalPoint y;
+    brainWhereSolved->TransformIndexToPhysicalPoint(m.GetIndex(), y);
+    const PhysicalPoint X = preopOf(rigid.TransformPoint(y));
+    bool wellInside = true, outside = false;
+    for (unsigned d = 0; d < 3; ++d) {
+      wellInside = wellInside && X[d] > -18.5 && X[d] < 18.5;
+      outside = outside || std::abs(X[d]) > 22.0; // the mesh's bounds: +-21.5 mm
+    }
+    inMask += m.Get();
+    wellInsideMissed += wellInside && !m.Get();
+    outsideTaken += outside && m.Get();
+  }
+  std::cout << "brain where solved: " << inMask << " voxels (" << meshVoxels << " located by the field)\n";
+  BS_CHECK_MSG(inMask == meshVoxels, inMask);
+  BS_CHECK_MSG(wellInsideMissed == 0, wellInsideMissed);
+  BS_CHECK_MSG(outsideTaken == 0, outsideTaken);
+  const MaskImage::Pointer noTumour = voxelsOfDeformedTissue(mesh, 4, rigid, grid, "mesh.vtu");
+  BS_CHECK(std::count(noTumour->GetBufferPointer(), noTumour->GetBufferPointer() + grid.numberOfVoxels(), 1) == 0);
+}
 } // namespace
 
 int DeformationFieldTest(int, char*[])
@@ -116,32 +147,7 @@ int DeformationFieldTest(int, char*[])
     BS_CHECK(far > 100);
     BS_CHECK_MSG(worstFar < 0.05, worstFar);
 
-    // Where the solve put a tissue: the voxels the deformed tetrahedra of its label hold. Every
-    // tetrahedron is brain here, so they are the voxels the field located in the mesh; well inside
-    // the displaced box all of them, outside it none; another label holds none.
-    const MaskImage::Pointer brainWhereSolved = voxelsOfDeformedTissue(mesh.mesh, 2, *rigid, grid, "mesh.vtu");
-    BS_CHECK(ImageGeometry::of(brainWhereSolved.GetPointer()).sameGridAs(grid));
-    std::size_t inMask = 0, wellInsideMissed = 0, outsideTaken = 0;
-    itk::ImageRegionConstIteratorWithIndex<MaskImage> m(brainWhereSolved, brainWhereSolved->GetLargestPossibleRegion());
-    for (; !m.IsAtEnd(); ++m) {
-      PhysicalPoint y;
-      brainWhereSolved->TransformIndexToPhysicalPoint(m.GetIndex(), y);
-      const PhysicalPoint X = preopOf(rigid->TransformPoint(y));
-      bool wellInside = true, outside = false;
-      for (unsigned d = 0; d < 3; ++d) {
-        wellInside = wellInside && X[d] > -18.5 && X[d] < 18.5;
-        outside = outside || std::abs(X[d]) > 22.0; // the mesh's bounds: +-21.5 mm
-      }
-      inMask += m.Get();
-      wellInsideMissed += wellInside && !m.Get();
-      outsideTaken += outside && m.Get();
-    }
-    std::cout << "brain where solved: " << inMask << " voxels (" << f.meshVoxels << " located by the field)\n";
-    BS_CHECK_MSG(inMask == f.meshVoxels, inMask);
-    BS_CHECK_MSG(wellInsideMissed == 0, wellInsideMissed);
-    BS_CHECK_MSG(outsideTaken == 0, outsideTaken);
-    const MaskImage::Pointer noTumour = voxelsOfDeformedTissue(mesh.mesh, 4, *rigid, grid, "mesh.vtu");
-    BS_CHECK(std::count(noTumour->GetBufferPointer(), noTumour->GetBufferPointer() + grid.numberOfVoxels(), 1) == 0);
+    checkTissueWhereSolved(mesh.mesh, *rigid, grid, f.meshVoxels);
 
     // Warping: a preoperative ramp (value = its x coordinate) reads back X_x inside.
     const ImageGeometry preopGrid = brainshift::testing::grid({{60, 60, 60}}, {1.0, 1.0, 1.0}, point(-30, -30, -30));

@@ -92,6 +92,22 @@ void panelClassifiesWithThePreoperativeImage()
 }
 } // namespace
 
+namespace {
+/// k is the command line's, from the one configuration; the host's --config reaches the panel.
+void checkNeighboursFromConfiguration(brainshift::Scene& scene, const brainshift::TissueClassificationPanel& panel)
+{
+  using namespace brainshift;
+  BS_CHECK(panel.neighboursBox()->value() == int(Configuration{}.classificationK));
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / "brainshift-panel-k9.json";
+  std::ofstream(file) << R"({"classification": {"k": 9}})";
+  ModuleContext configured;
+  configured.configurationFile = file.string();
+  const TissueClassificationPanel nine(scene, configured);
+  BS_CHECK_MSG(nine.neighboursBox()->value() == 9, nine.neighboursBox()->value());
+  std::filesystem::remove(file);
+}
+} // namespace
+
 int TissueClassificationPanelTest(int argc, char* argv[])
 {
   QApplication application(argc, argv);
@@ -112,17 +128,7 @@ int TissueClassificationPanelTest(int argc, char* argv[])
     context.subscribeToPicks = [&pick](QObject*, std::function<void(const std::array<double, 3>&)> onPick) { pick = onPick; };
     TissueClassificationPanel panel(scene, context);
     BS_CHECK(pick && panel.pickButton()->isEnabled());
-    // k is the command line's, from the one configuration; the host's --config reaches the panel.
-    BS_CHECK(panel.neighboursBox()->value() == int(Configuration{}.classificationK));
-    {
-      const std::filesystem::path file = std::filesystem::temp_directory_path() / "brainshift-panel-k9.json";
-      std::ofstream(file) << R"({"classification": {"k": 9}})";
-      ModuleContext configured;
-      configured.configurationFile = file.string();
-      const TissueClassificationPanel nine(scene, configured);
-      BS_CHECK_MSG(nine.neighboursBox()->value() == 9, nine.neighboursBox()->value());
-      std::filesystem::remove(file);
-    }
+    checkNeighboursFromConfiguration(scene, panel);
     BS_CHECK(panel.intraopSelector()->currentNode() == intraop);
     // The preoperative MRI, as the command line passes it (offered: the "preop" volumes only).
     BS_CHECK(panel.preopImageSelector()->currentNode() == preop && panel.preopImageSelector()->count() == 1);
