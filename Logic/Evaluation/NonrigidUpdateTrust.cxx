@@ -102,9 +102,10 @@ IndexBox brainBox(const std::vector<const LabelImage*>& maps, const ImageGeometr
   return box;
 }
 
-/// The brain (labels 2, 3, 4) of `labels` within `box`, as an image of its own whose voxels lie
-/// where they lie on the full grid.
-MaskPointer brainMaskIn(const LabelImage& labels, const ImageGeometry& grid, const IndexBox& box)
+/// The voxels of `box` (an image of its own whose voxels lie where they lie on the full grid) on
+/// either side of a face between brain (labels 2, 3, 4) and other voxels of any of `maps` (faces on
+/// the grid's edge are none: beyond it nothing is known).
+MaskPointer brainBoundaryVoxelsIn(const std::vector<const LabelImage*>& maps, const ImageGeometry& grid, const IndexBox& box)
 {
   ImageGeometry cropped = grid;
   LabelImage::IndexType corner;
@@ -112,25 +113,36 @@ MaskPointer brainMaskIn(const LabelImage& labels, const ImageGeometry& grid, con
     cropped.size[a] = box.last[a] - box.first[a];
     corner[a] = itk::IndexValueType(box.first[a]);
   }
-  labels.TransformIndexToPhysicalPoint(corner, cropped.origin);
-  MaskPointer mask = cropped.allocate<MaskImage>();
-  unsigned char* m = mask->GetBufferPointer();
-  const LabelPixel* l = labels.GetBufferPointer();
-  for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
-    for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
-      const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
-      for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) m[j] = isBrainLabel(l[row + x]) ? 1 : 0;
+  maps.front()->TransformIndexToPhysicalPoint(corner, cropped.origin);
+  MaskPointer boundary = cropped.allocate<MaskImage>();
+  unsigned char* b = boundary->GetBufferPointer();
+  std::fill(b, b + box.voxels(), 0);
+  const std::size_t strides[3] = {1, grid.size[0], grid.size[0] * grid.size[1]};
+  for (const LabelImage* labels : maps) {
+    const LabelPixel* l = labels->GetBufferPointer();
+    for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
+      for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
+        for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
+          if (b[j]) continue;
+          const std::size_t i = (z * grid.size[1] + y) * grid.size[0] + x;
+          const bool brain = isBrainLabel(l[i]);
+          const std::size_t at[3] = {x, y, z};
+          for (int a = 0; a < 3 && !b[j]; ++a) {
+            if (at[a] > 0 && isBrainLabel(l[i - strides[a]]) != brain) b[j] = 1;
+            else if (at[a] + 1 < grid.size[a] && isBrainLabel(l[i + strides[a]]) != brain) b[j] = 1;
+          }
+        }
+      }
     }
   }
-  return mask;
+  return boundary;
 }
 
-/// Per voxel: 1 band (near any map's brain boundary), 2 interior (inside the first of the
-/// classification and the rigidly warped labels, beyond the band), 0 elsewhere. The distances are
-/// computed in the box that holds every map's brain, grown by twice the band and a few voxels:
-/// beyond it no voxel is within the band of a boundary, nor inside a brain, and the box's own
-/// faces (which the distance maps may take for a boundary of the outside) are more than twice the
-/// band from any brain, so the region is the one of distances over the whole grid.
+/// Per voxel: 1 band (within the band's half width of a voxel on either side of any map's brain
+/// boundary), 2 interior (brain in the first of the classification and the rigidly warped labels,
+/// beyond the band), 0 elsewhere. One distance map, to the boundary voxels of all the maps, in the
+/// box that holds every map's brain grown by the band and two voxels: beyond it no voxel is
+/// within the band of a boundary, nor inside a brain.
 std::vector<unsigned char> regionsOf(const NonrigidUpdateTrustInputs& in, double bandHalfWidthMm, std::size_t n)
 {
   std::vector<unsigned char> region(n, 0);
@@ -142,30 +154,18 @@ std::vector<unsigned char> regionsOf(const NonrigidUpdateTrustInputs& in, double
   }
   const ImageGeometry grid = ImageGeometry::of(maps.front());
   std::array<std::size_t, 3> margin{};
-  for (int a = 0; a < 3; ++a) margin[a] = std::size_t(std::ceil(2 * bandHalfWidthMm / grid.spacing[a])) + 3;
+  for (int a = 0; a < 3; ++a) margin[a] = std::size_t(std::ceil(bandHalfWidthMm / grid.spacing[a])) + 2;
   const IndexBox box = brainBox(maps, grid, margin);
   if (box.voxels() == 0) return region;
-  std::vector<float> interiorDistance;
-  for (const LabelImage* labels : maps) {
-    const ScalarImage::Pointer distance = boundaryDistanceMm(brainMaskIn(*labels, grid, box));
-    const float* d = distance->GetBufferPointer();
-    const bool interiorMap = labels == interiorSource;
-    if (interiorMap) interiorDistance.assign(box.voxels(), 0.0f);
-    for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
-      for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
-        const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
-        for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
-          if (std::abs(d[j]) <= bandHalfWidthMm) region[row + x] = 1;
-          if (interiorMap) interiorDistance[j] = d[j];
-        }
-      }
-    }
-  }
+  const ScalarImage::Pointer distance = signedDistanceMm(brainBoundaryVoxelsIn(maps, grid, box));
+  const float* d = distance->GetBufferPointer();
+  const LabelPixel* interior = interiorSource->GetBufferPointer();
   for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
     for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
       const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
       for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
-        if (region[row + x] == 0 && interiorDistance[j] < 0) region[row + x] = 2;
+        if (d[j] <= bandHalfWidthMm) region[row + x] = 1;
+        else if (isBrainLabel(interior[row + x])) region[row + x] = 2;
       }
     }
   }

@@ -37,8 +37,9 @@ struct NonrigidUpdateTrustInputs {
   const ScalarImage* warpedByUpdate = nullptr; ///< the preoperative image under the whole update
   const ScalarImage* warpedByRigid = nullptr;  ///< the same under the rigid transform alone
   /// The brain (labels 2, 3, 4) of these label maps places the regions: the band is within
-  /// `bandHalfWidthMm` of any of their brain boundaries; the interior is inside the first given of
-  /// the classification and the rigidly warped labels, beyond the band. At least one is needed.
+  /// `bandHalfWidthMm` of a voxel on either side of any of their brain boundaries; the interior is
+  /// inside the first given of the classification and the rigidly warped labels, beyond the band.
+  /// At least one is needed.
   const LabelImage* intraopLabels = nullptr;
   const LabelImage* labelsWarpedByUpdate = nullptr;
   const LabelImage* labelsWarpedByRigid = nullptr;
