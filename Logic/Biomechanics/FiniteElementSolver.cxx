@@ -20,6 +20,13 @@
 namespace brainshift {
 namespace fs = std::filesystem;
 
+std::string solverOptionsForRepeatedSolves(const std::string& given)
+{
+  if (given.find("-ksp_type") != std::string::npos || given.find("-pc_type") != std::string::npos) return given;
+  const bool subGiven = given.find("-sub_pc_type") != std::string::npos;
+  return std::string("-ksp_type cg -pc_type bjacobi ") + (subGiven ? "" : "-sub_pc_type icc ") + given;
+}
+
 fs::path workerBesideExecutable()
 {
   std::error_code ec;

@@ -71,4 +71,12 @@ private:
 /// The worker beside the running executable (for the command line and the host).
 std::filesystem::path workerBesideExecutable();
 
+/// The PETSc options of a worker that solves more than once (a watch session's, a solve followed by
+/// one with block matches): `given`, after conjugate gradients with incomplete Cholesky in the
+/// blocks unless `given` chooses the method or the preconditioner. Each solve imposes other nodes
+/// or constraints, and an incomplete Cholesky is set up again in a fraction of the time a Cholesky
+/// factorisation is; PETSc's ILU(0) in the blocks is not always positive, and CG broke down on it
+/// (KSP reason -8) on the small case meshed with grading 1.
+std::string solverOptionsForRepeatedSolves(const std::string& given);
+
 } // namespace brainshift

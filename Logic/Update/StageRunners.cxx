@@ -184,9 +184,10 @@ TissueClassificationResult classifyWithPrior(RunContext& context, const SpatialT
   const LabelImage::Pointer seen =
     labelsSeenByTheScan(context.preopLabels("classify"), rigid, context.intraopImage("classify"), fieldOfViewWarnings);
   context.report().addWarnings(fieldOfViewWarnings);
-  if (SerialScanSession* session = context.session(); session && !seen) { // the preoperative maps once per session
-    if (!session->tissueMaps) session->tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
-    parameters.preoperativeMaps = session->tissueMaps;
+  if (!seen) { // the preoperative maps once per session, or per run (a repeated pass)
+    SerialScanSession& kept = context.kept();
+    if (!kept.tissueMaps) kept.tissueMaps = preparePreoperativeTissueMaps(context.preopLabels("classify"));
+    parameters.preoperativeMaps = kept.tissueMaps;
   }
   return classifyTissues(context.intraopImage("classify"), seen ? *seen : context.preopLabels("classify"), rigid, prototypes, parameters);
 }
@@ -306,18 +307,11 @@ namespace brainshift {
 namespace {
 /// A watch session's solve: its served worker when it was prepared for this mesh, materials and
 /// solver options (the scan's fixed nodes are eliminated anew), else a worker prepared now.
-/// Iterative by default: each scan imposes other nodes, and an incomplete Cholesky is set up again
-/// in a fraction of the time a Cholesky factorisation is.
+/// Iterative by default (solverOptionsForRepeatedSolves).
 FiniteElementResult solveInSession(SerialScanSession& session, FiniteElementJob job, const FiniteElementRunOptions& options,
                                    bool& prepared)
 {
-  if (job.solverOptions.find("-ksp_type") == std::string::npos && job.solverOptions.find("-pc_type") == std::string::npos) {
-    // Incomplete Cholesky in the blocks, as the worker's tuned default does: PETSc's ILU(0) there
-    // is not always positive, and CG broke down on it (KSP reason -8) on the small case meshed
-    // with grading 1.
-    const bool subGiven = job.solverOptions.find("-sub_pc_type") != std::string::npos;
-    job.solverOptions = std::string("-ksp_type cg -pc_type bjacobi ") + (subGiven ? "" : "-sub_pc_type icc ") + job.solverOptions;
-  }
+  job.solverOptions = solverOptionsForRepeatedSolves(job.solverOptions);
   auto sameProblem = [&job](const FiniteElementJob& other) {
     if (other.nodes != job.nodes || other.tetrahedra != job.tetrahedra || other.materialOfTetrahedron != job.materialOfTetrahedron ||
         other.solverOptions != job.solverOptions || other.materials.size() != job.materials.size()) {
@@ -405,16 +399,16 @@ void runSimulateStage(RunContext& context)
   const FiniteElementJob job = finiteElementJobFromModel(mesh, surface, configuration, meshFile.string(), surfaceFile.string());
   bool served = false, prepared = false;
   FiniteElementResult result;
-  // Block matching solves again with the matches: a one-shot stage then keeps one worker for both
-  // solves (partitioned and assembled once), as a watch session does.
+  // Block matching solves again with the matches: a run outside a watch session then keeps one
+  // worker for both solves and for the run's later passes (partitioned and assembled once), as a
+  // watch session does.
   const std::optional<std::string> matchingUnavailable =
     configuration.blockMatching.enabled ? imageMatchingUnavailable(context) : std::optional<std::string>("disabled");
-  SerialScanSession stageWorker;
   SerialScanSession* session = context.session();
   served = session != nullptr;
   const WorkerOptions worker(context, "simulate");
   const FiniteElementRunOptions& options = worker.options;
-  if (!session && !matchingUnavailable) session = &stageWorker;
+  if (!session && !matchingUnavailable) session = &context.kept();
   if (session) {
     result = solveInSession(*session, job, options, prepared);
   } else {
@@ -428,11 +422,23 @@ void runSimulateStage(RunContext& context)
     blockMatching["reason"] = *matchingUnavailable;
     context.report().addWarning("simulate: block matching did not run (" + *matchingUnavailable + "); the solve is the surface's alone");
   } else if (configuration.blockMatching.enabled) {
-    const ConstrainedSolve solve = [&](const FiniteElementJob& constrained) {
-      return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
-                                    constrained.rejection);
-    };
-    result = runImageDrivenSolve(context, mesh, job, surfaceOnly, solve, blockMatching, evidence);
+    // A first solve the tumour's second look replaces (finding the tumour resected where this
+    // solve puts it, the refine stage classifies and solves again) is the surface's alone: the pass
+    // after it matches the blocks. (The refine stage's passes keep the first solve's matches: the
+    // labels it warps are their prior, and without them the T2 scans lost 0.05-0.13 mm mean.)
+    attachDisplacements(mesh, surfaceOnly);
+    if (secondLookResectsTumour(context, mesh, meshFile.string())) {
+      const std::string why = "the tumour is resected where the surface's solve puts it: the refine stage classifies and solves again";
+      blockMatching["used"] = false;
+      blockMatching["reason"] = why + ", and matches the blocks there";
+      context.say("simulate: block matching waits: %s\n", why.c_str());
+    } else {
+      const ConstrainedSolve solve = [&](const FiniteElementJob& constrained) {
+        return session->worker->solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints,
+                                      constrained.rejection);
+      };
+      result = runImageDrivenSolve(context, mesh, job, surfaceOnly, solve, blockMatching, evidence);
+    }
   }
   attachDisplacements(mesh, result);
   attachUncertainty(mesh, job, result, evidence);

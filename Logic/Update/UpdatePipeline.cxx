@@ -390,6 +390,7 @@ std::string nonrigidUpdateTrustIn(const nlohmann::json& report)
 
 void runPipeline(RunContext& context)
 {
+  Stopwatch clock;
   for (const PipelineStage& stage : pipelineStages()) {
     if (!stage.run) {
       throw NotAvailableError("stage '" + stage.name + "' (" + stage.summary.substr(0, stage.summary.find(" (")) +
@@ -398,6 +399,9 @@ void runPipeline(RunContext& context)
     throwIfCancelled(context.cancelFlag(), "the update");
     context.stageStarts(stage.name, std::size_t(&stage - pipelineStages().data()), pipelineStages().size());
     stage.run(context);
+    // The stages' own figures count a repeated stage once, in its last pass: this is every pass,
+    // from the first stage's start to the last one's end (the inputs read before it).
+    context.report().set("pipeline_wall_seconds", clock.seconds());
     context.report().save();
   }
 }

@@ -22,7 +22,10 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
+
+class vtkUnstructuredGrid;
 
 namespace brainshift {
 
@@ -61,7 +64,8 @@ Configuration configurationFor(const RunOptions& options);
 
 /// What `brainshift watch` keeps between the scans of one case, in memory: the preoperative inputs
 /// (read and checked once, before surgery) and the finite element worker, served (its partition
-/// and assembled matrix kept; each scan's fixed nodes eliminated anew).
+/// and assembled matrix kept; each scan's fixed nodes eliminated anew). A run outside a session
+/// keeps one of its own between the passes of its stages (RunContext::kept).
 struct SerialScanSession {
   std::optional<RegistrationInputs> preoperative; ///< preoperative image, labels, overlays
   std::shared_ptr<const PreoperativeTissueMaps> tissueMaps; ///< the classification's, of those labels
@@ -73,6 +77,13 @@ struct SerialScanSession {
   std::atomic<bool> cancelRequested{false};
   std::unique_ptr<FiniteElementSession> worker;
   int scans = 0; ///< scans registered so far
+};
+
+/// Where the first solve put the tumour, when the first classification found it in place by the
+/// image (the refine stage's second look): its voxels voting as the tumour's prototypes did.
+struct TumourSecondLook {
+  nlohmann::json entry = nullptr; ///< null: not looked at (no tumour, told, or resected already)
+  bool resected = false;
 };
 
 /// One run of stages on one case: its options, configuration and report, and its inputs, each read
@@ -123,6 +134,12 @@ public:
   /// simulate stage solves with its served worker.
   void joinSession(SerialScanSession& session) { session_ = &session; }
   SerialScanSession* session() const { return session_; }
+  /// What the stages keep between their passes: the watch session (kept between scans too), or
+  /// this run's own (its worker, started by the first solve and kept for the later ones: the block
+  /// matches' solve, the refine stage's passes, the tumour's second look solve the same mesh,
+  /// partitioned and assembled once; the preoperative tissue maps, classified against again). The
+  /// run's own stops its worker when the run ends.
+  SerialScanSession& kept() { return session_ ? *session_ : keptByRun_; }
   /// The refine stage's spatial prior: the preoperative labels warped onto the intraoperative grid
   /// by the last solve (classify then uses them with the identity instead of the preoperative labels
   /// through the rigid transform, and surface reuses the preoperative boundary it found); null: none.
@@ -147,6 +164,10 @@ public:
   };
   void holdTumourDecision(std::optional<HeldTumourDecision> decision) { heldTumourDecision_ = std::move(decision); }
   const std::optional<HeldTumourDecision>& heldTumourDecision() const { return heldTumourDecision_; }
+  /// The tumour's second look, when the simulate stage made it on its first solve (before the
+  /// block matches): the refine stage takes it instead of looking again.
+  void keepTumourSecondLook(TumourSecondLook look) { tumourSecondLook_ = std::move(look); }
+  std::optional<TumourSecondLook> takeTumourSecondLook() { return std::exchange(tumourSecondLook_, std::nullopt); }
   /// Another pass over this scan (the refine stage's): the surface stage starts from the
   /// preoperative boundary this scan's own surface holds.
   void setRepeatPass(bool repeat) { repeatPass_ = repeat; }
@@ -179,8 +200,11 @@ private:
   LabelImage::Pointer anchorLabels_;
   std::optional<HeldTumourDecision> heldTumourDecision_;
   bool repeatPass_ = false;
+  std::optional<TumourSecondLook> tumourSecondLook_;
   StageProducts products_;
   std::optional<DisplacementEvidence> solveEvidence_;
+  /// Last: its worker stops first, while what its progress and cancellation reach still lives.
+  SerialScanSession keptByRun_;
 };
 
 /// The case's identity, kept in report.json as "case_inputs": the paths of the preoperative image
@@ -242,6 +266,12 @@ void runMeshStage(RunContext& context);
 void runSurfaceStage(RunContext& context);
 void runWarpStage(RunContext& context);
 void runRefineStage(RunContext& context); ///< RefineStage.cxx
+/// The refine stage's second look at the tumour, made early on the first solve of a scan
+/// (`firstSolve`, its displacements attached; `meshName` names it in errors): whether it finds the
+/// tumour resected where that solve puts it. Then the look is kept for the refine stage, which
+/// classifies and solves again with the tumour resected; else the refine stage looks again on the
+/// scan's final solve. False in the refine stage's own passes.
+bool secondLookResectsTumour(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName);
 /// The tumour's evidence as report.json keeps it (null without a tumour).
 nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& evidence);
 
