@@ -585,7 +585,7 @@ void TissueClassificationParameters::validate() const
   if (prototypesPerClass < k) {
     throw InputError("classification: " + std::to_string(prototypesPerClass) + " prototypes per class is fewer than k = " + std::to_string(k));
   }
-  if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0) || !(gapReachMm >= 0)) {
+  if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0) || !(gapReachMm >= 0) || !(cavityReachMm >= 0)) {
     throw InputError("classification: erosion, opening, gap reach and hole size must be non-negative");
   }
 }
@@ -1030,7 +1030,8 @@ private:
 /// 2.5 mm slice can be crossed), where the preoperative image showed tissue.
 /// That is the sheet of fluid pooled over a brain that sank (brain before it sank); sulci and
 /// cisterns next to a gap were fluid before surgery too and stay brain. Returns the voxels taken.
-std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid, const std::vector<std::size_t>& gaps, LabelPixel* out)
+std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid, const std::vector<std::size_t>& gaps, bool tumourResected,
+                            LabelPixel* out)
 {
   const PreoperativeImageLook& look = *w.P.preopLook;
   if (gaps.empty() || !look.image || !look.intraopToPreop || !std::isfinite(look.medians.fluid) ||
@@ -1040,6 +1041,15 @@ std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid,
   const PreoperativeTissueLook showedTissue(w, look);
   const auto spacing = w.intraop.GetSpacing();
   const float reach = float(std::max({w.P.gapReachMm, spacing[0], spacing[1], spacing[2]}) + 1e-3);
+  // Around a resection cavity (within the spatial channels' saturation of the aligned tumour) the
+  // reach is the cavity's: the cavity and the gap are one body of fluid, and a long reach from the
+  // cavity takes the tissue around it.
+  const float cavityReach = float(std::max({w.P.cavityReachMm, spacing[0], spacing[1], spacing[2]}) + 1e-3);
+  const std::size_t tumourSlot = w.slotOf(Tumour);
+  const bool cavity = tumourResected && tumourSlot < w.T;
+  auto reachAt = [&](std::size_t voxel) {
+    return cavity && w.distance(voxel, tumourSlot) < float(w.P.saturationMm) ? std::min(cavityReach, reach) : reach;
+  };
   const auto size = w.size;
   const std::size_t strides[3] = {1, size[0], size[0] * size[1]};
   const unsigned char* isFluid = fluid.GetBufferPointer();
@@ -1063,7 +1073,7 @@ std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid,
       for (const bool up : {false, true}) {
         if (up ? at[axis] + 1 == size[axis] : at[axis] == 0) continue;
         const std::size_t j = up ? i + strides[axis] : i - strides[axis];
-        if (step >= pathMm[j]) continue;
+        if (step >= pathMm[j] || step > reachAt(j)) continue;
         if (pathMm[j] == unreached) { // first reached: fluid the k-NN calls brain (not ventricles), tissue before surgery
           if (!isFluid[j] || !isBrainLabel(out[j]) || out[j] == Ventricles || !showedTissue(j)) continue;
           out[j] = Background;
@@ -1111,7 +1121,7 @@ void separateThickFluid(const ClassificationWork& w, TissueClassificationResult&
   // 0.956 -> 0.950), as the aligned brain's thickness did (fluidInBrain).
   if (w.P.preopLook && !result.contrast.fluidBrighterThanParenchyma()) {
     const auto s = w.intraop.GetSpacing();
-    result.fluidJoinedToGapsMl = double(joinFluidToGaps(w, *fluid, gaps, out)) * s[0] * s[1] * s[2] / 1000.0;
+    result.fluidJoinedToGapsMl = double(joinFluidToGaps(w, *fluid, gaps, result.tumourResected, out)) * s[0] * s[1] * s[2] / 1000.0;
   }
 }
 

@@ -148,7 +148,10 @@ struct TissueClassificationParameters {
   /// they lie where tissue was). Empty, or where the scan's fluid is brighter than its parenchyma
   /// (T2: the cortex with its CSF looks like fluid there): no growth.
   std::optional<PreoperativeImageLook> preopLook;
-  double gapReachMm = 3.0;
+  double gapReachMm = 6.0;
+  /// The reach around a resected tumour (within saturationMm of where the rigid prior puts it): the
+  /// cavity and the gap are one body of fluid there, and a long reach takes the tissue around the cavity.
+  double cavityReachMm = 3.0;
   std::uint64_t seed = 2000;
   TumourResection tumourResection = TumourResection::Auto;
   /// preoperativeTumourContrast of the case; NaN: the tumour is compared with fluid and parenchyma alone.
