@@ -3,16 +3,20 @@
 #include "ActiveSurfaceLogic.h"
 #include "BiomechanicalModel.h"
 #include "FiniteElementSolver.h"
+#include "ImageMatchConstraints.h"
 
 #include <vtkPointData.h>
 
+#include <QCheckBox>
 #include <QElapsedTimer>
 #include <QFormLayout>
 #include <QSpinBox>
 #include <QTimer>
 #include <QVBoxLayout>
 
+#include <cstdint>
 #include <functional>
+#include <optional>
 
 namespace brainshift {
 
@@ -26,6 +30,11 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& 
   intraopLabels_ = new NodeSelector({NodeKind::LabelMapVolume}, {}, this);
   intraop_ = new NodeSelector({NodeKind::ScalarVolume}, {}, this);
   transform_ = new NodeSelector({NodeKind::Transform}, {}, this);
+  preop_ = new NodeSelector({NodeKind::ScalarVolume}, "preop", this); // the preoperative MRI, not an overlay
+  blockMatching_ = new QCheckBox(tr("Block matching inside the brain"), this);
+  blockMatching_->setChecked(configuration_.blockMatching.enabled); // as the command line
+  blockMatching_->setToolTip(tr("Blocks of the preoperative volume found again in the intraoperative one, "
+                                "as soft constraints of a second solve"));
   ranks_ = new QSpinBox(this);
   ranks_->setRange(1, 64);
   ranks_->setValue(configuration_.ranks); // as the command line
@@ -41,13 +50,15 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& 
   form->addRow(tr("Intraoperative labels"), intraopLabels_);
   form->addRow(tr("Intraoperative volume"), intraop_);
   form->addRow(tr("Rigid intraop_to_preop"), transform_);
+  form->addRow(tr("Preoperative volume"), preop_);
+  form->addRow(QString(), blockMatching_);
   form->addRow(tr("Ranks"), ranks_);
   auto* column = new QVBoxLayout(this);
   column->addLayout(form);
   column->addWidget(controls_);
   column->addStretch(1);
 
-  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(&scene_);
+  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_}) selector->setScene(&scene_);
   connect(controls_, &StageRunControls::runRequested, this, &BrainDeformationPanel::run);
   connect(controls_, &StageRunControls::runningChanged, this, &BrainDeformationPanel::lockInputs);
   connect(controls_, &StageRunControls::finished, this, &BrainDeformationPanel::runFinished);
@@ -57,12 +68,12 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& 
 BrainDeformationPanel::~BrainDeformationPanel()
 {
   // The controls go with this panel and cancel its run: no worker ranks outlive the panel's interest.
-  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_}) selector->setScene(nullptr);
+  for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_}) selector->setScene(nullptr);
 }
 
 void BrainDeformationPanel::lockInputs(bool locked)
 {
-  for (QWidget* input : std::initializer_list<QWidget*>{mesh_, preopLabels_, intraopLabels_, intraop_, transform_, ranks_}) {
+  for (QWidget* input : std::initializer_list<QWidget*>{mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_, blockMatching_, ranks_}) {
     input->setEnabled(!locked);
   }
   if (locked) boardReader_->start();
@@ -85,15 +96,18 @@ void BrainDeformationPanel::readProgressBoard()
 void BrainDeformationPanel::showStage(const QString& stage, double fraction)
 {
   if (!isRunning()) return; // a late report of a cancelled run
-  // The surface stage reports no fraction: the busy bar stays. The solve's stages share the bar.
-  if (stage != "surface") {
+  // The surface stage and the block matching report no fraction: the bar stays. The solves'
+  // stages share the bar.
+  if (stage != "surface" && stage != "block matching") {
     static const QStringList solverStages{"partition", "assembly", "setup", "solve", "done"};
     const int index = std::max(0, int(solverStages.indexOf(stage)));
     controls_->showFraction((index + std::clamp(fraction, 0.0, 1.0)) / (solverStages.size() - 1));
   }
   if (stage != lastStage_) {
     lastStage_ = stage;
-    controls_->setStatus(stage == "surface" ? tr("Matching the brain surface ...") : tr("Finite element solve: %1 ...").arg(stage));
+    controls_->setStatus(stage == "surface"          ? tr("Matching the brain surface ...")
+                         : stage == "block matching" ? tr("Matching blocks inside the brain ...")
+                                                     : tr("Finite element solve: %1 ...").arg(stage));
     emit stageStarted(stage);
   }
 }
@@ -105,6 +119,8 @@ struct DeformationInputs {
   vtkSmartPointer<vtkUnstructuredGrid> mesh;
   LabelImage::ConstPointer preop, intraopSegmentation;
   ScalarImage::ConstPointer image;
+  ScalarImage::ConstPointer preopImage; ///< null: no block matching
+  bool matchingWanted = false;          ///< block matching was asked for (with or without the volume)
   SpatialTransform::ConstPointer rigid;
   std::string meshId, rigidId;
   int ranks = 1;
@@ -120,8 +136,32 @@ struct DeformationOutcome {
   std::size_t imposed = 0;
   double maximum = 0, residual = 0;
   FiniteElementResult solved;
+  std::optional<ImageDrivenSolve> matched; ///< with block matching
+  bool matchingWithoutVolume = false;      ///< asked for, but no preoperative volume was chosen
   double seconds = 0;
 };
+
+/// The block matches from the surface-driven solve, and the mesh solved again with them, both
+/// solves on one worker with the options for repeated solves (as the command line's `simulate`).
+FiniteElementResult solveWithBlockMatches(const DeformationInputs& in, FiniteElementJob job, const FiniteElementRunOptions& options,
+                                          bool tumourResected, const StageReport& report, DeformationOutcome& outcome)
+{
+  job.solverOptions = solverOptionsForRepeatedSolves(job.solverOptions);
+  FiniteElementSession session(job, options);
+  const FiniteElementResult surfaceOnly = session.solve(job.fixedDisplacements);
+  report("block matching", 0.0);
+  ImageDrivenSolveInputs inputs;
+  inputs.preopImage = in.preopImage.GetPointer();
+  inputs.preopLabels = in.preop.GetPointer();
+  inputs.intraopImage = in.image.GetPointer();
+  inputs.intraopLabels = in.intraopSegmentation.GetPointer();
+  inputs.rigidIntraopToPreop = in.rigid.GetPointer();
+  inputs.tumourResected = tumourResected;
+  outcome.matched = solveWithImageMatches(in.mesh, job, surfaceOnly, inputs, in.configuration, [&session](const FiniteElementJob& constrained) {
+    return session.solve(constrained.fixedNodes, constrained.fixedDisplacements, constrained.softConstraints, constrained.rejection);
+  });
+  return outcome.matched->result;
+}
 
 /// On the worker thread: the active surface, then the finite element solve; the displacements
 /// are attached to the copied mesh.
@@ -142,8 +182,10 @@ DeformationOutcome deformAndSolve(const DeformationInputs& in, CancelFlag cancel
   options.cancel = cancel;
   options.progress = report;
   DeformationOutcome outcome;
-  outcome.solved = solveWithWorker(job, options);
+  outcome.solved = in.preopImage ? solveWithBlockMatches(in, job, options, surface.tumourResected, report, outcome)
+                                 : solveWithWorker(job, options);
   attachDisplacements(in.mesh, outcome.solved);
+  outcome.matchingWithoutVolume = in.matchingWanted && !in.preopImage;
   outcome.seconds = clock.elapsed() / 1000.0;
   outcome.brainSurface = surface.surface;
   outcome.imposed = surface.imposedNodes;
@@ -173,12 +215,27 @@ void placeBrainSurface(Scene& scene, const std::string& name, const vtkSmartPoin
 
 QString doneMessage(const DeformationOutcome& o)
 {
-  return BrainDeformationPanel::tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm); %5 equations on %6 "
-                                   "rank(s), %7 iterations, residual %8.")
+  QString matches;
+  if (o.matched && o.matched->used) {
+    std::size_t kept = 0;
+    for (std::uint8_t k : o.solved.softConstraintKept) kept += k;
+    matches = BrainDeformationPanel::tr(" %1 of %2 block matches kept, misfit %3 -> %4 mm;")
+                .arg(kept)
+                .arg(o.matched->matching.matches.size())
+                .arg(o.matched->rmsMisfitSurfaceOnlyMm, 0, 'f', 2)
+                .arg(o.solved.rmsMisfitPerRoundMm.empty() ? 0.0 : o.solved.rmsMisfitPerRoundMm.back(), 0, 'f', 2);
+  } else if (o.matched) {
+    matches = BrainDeformationPanel::tr(" no block matched (%1 selected): the surface's solve;").arg(o.matched->matching.selected);
+  } else if (o.matchingWithoutVolume) {
+    matches = BrainDeformationPanel::tr(" no block matching (choose the preoperative volume): the surface's solve;");
+  }
+  return BrainDeformationPanel::tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm);%5 %6 equations on %7 "
+                                   "rank(s), %8 iterations, residual %9.")
     .arg(o.seconds, 0, 'f', 1)
     .arg(o.imposed)
     .arg(o.maximum, 0, 'f', 1)
     .arg(o.residual, 0, 'f', 2)
+    .arg(matches)
     .arg(o.solved.equations)
     .arg(o.solved.ranks)
     .arg(o.solved.iterations)
@@ -194,18 +251,24 @@ void BrainDeformationPanel::run()
   auto intraopLabels = std::dynamic_pointer_cast<LabelMapVolumeNode>(intraopLabels_->currentNode());
   auto intraop = std::dynamic_pointer_cast<ScalarVolumeNode>(intraop_->currentNode());
   auto transform = std::dynamic_pointer_cast<TransformNode>(transform_->currentNode());
+  auto preop = std::dynamic_pointer_cast<ScalarVolumeNode>(preop_->currentNode());
   auto* meshData = meshNode ? vtkUnstructuredGrid::SafeDownCast(meshNode->mesh()) : nullptr;
   if (!meshData || !preopLabels || !preopLabels->image() || !intraopLabels || !intraopLabels->image() || !intraop ||
       !intraop->image() || !transform || !transform->transformFromParent()) {
     controls_->setStatus(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
     return;
   }
+
   DeformationInputs inputs;
   inputs.mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
   inputs.mesh->DeepCopy(meshData);
   inputs.preop = preopLabels->image();
   inputs.intraopSegmentation = intraopLabels->image();
   inputs.image = intraop->image();
+  // As the command line: block matching needs the preoperative volume; without one the solve is
+  // the surface's alone, and the status says so.
+  inputs.matchingWanted = blockMatching_->isChecked();
+  if (inputs.matchingWanted && preop) inputs.preopImage = preop->image();
   inputs.rigid = transform->transformFromParent();
   inputs.meshId = meshNode->id();
   inputs.rigidId = transform->id();

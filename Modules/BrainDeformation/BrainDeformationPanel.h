@@ -1,13 +1,16 @@
 #pragma once
 // The brain deformation panel: binds the active surface (ActiveSurfaceLogic) and the finite
-// element solve (FiniteElementSolver, the MPI worker) to the scene. Inputs: the mesh, the
-// preoperative and intraoperative labels, the intraoperative volume and the rigid transform.
-// Results: the model "brain surface" (coloured by DisplacementMagnitude, under the rigid transform:
-// the contract's model frame) and the mesh's point arrays Displacement and DisplacementMagnitude.
+// element solve (FiniteElementSolver, the MPI worker) to the scene, and, as the command line's
+// `simulate` does by default, the image's block matches inside the brain as soft constraints of a
+// second solve (ImageMatchConstraints.h; both solves on one worker). Inputs: the mesh, the
+// preoperative and intraoperative labels, the intraoperative volume, the rigid transform and, for
+// block matching, the preoperative volume. Results: the model "brain surface" (coloured by
+// DisplacementMagnitude, under the rigid transform: the contract's model frame) and the mesh's
+// point arrays Displacement and DisplacementMagnitude.
 //
-// Progress and Cancel: the surface stage reports no fraction (a busy bar) and stops at its next
-// iteration; the solve reports its stages and fractions, and Cancel stops the worker's ranks (the
-// solver terminates them). One flag, the run's (BackgroundRun.h), cancels both.
+// Progress and Cancel: the surface stage and the block matching report no fraction and stop at
+// their next step; the solve reports its stages and fractions, and Cancel stops the worker's ranks
+// (the solver terminates them). One flag, the run's (BackgroundRun.h), cancels all.
 #include "Configuration.h"
 #include "NodeSelector.h"
 #include "StageRunControls.h"
@@ -19,6 +22,7 @@
 #include <mutex>
 #include <string>
 
+class QCheckBox;
 class QProgressBar;
 class QPushButton;
 class QSpinBox;
@@ -41,6 +45,9 @@ public:
   NodeSelector* intraopLabelsSelector() const { return intraopLabels_; }
   NodeSelector* intraopSelector() const { return intraop_; }
   NodeSelector* transformSelector() const { return transform_; }
+  NodeSelector* preopSelector() const { return preop_; }
+  /// On by default as the configuration's `block_matching.enabled`; needs the preoperative volume.
+  QCheckBox* blockMatchingBox() const { return blockMatching_; }
   QSpinBox* ranksBox() const { return ranks_; }
   QPushButton* runButton() const { return controls_->runButton(); }
   QPushButton* cancelButton() const { return controls_->cancelButton(); }
@@ -56,7 +63,8 @@ public slots:
   void cancel() { controls_->cancel(); }
 
 signals:
-  /// The stage now running: "surface", then the solver's ("partition", "assembly", "setup", "solve").
+  /// The stage now running: "surface", then the solver's ("partition", "assembly", "setup",
+  /// "solve"), and with block matching "block matching" and the second solve's ("setup", "solve").
   void stageStarted(const QString& stage);
   void runFinished(bool succeeded);
   void discardedRunFinished(bool stoppedEarly); ///< a cancelled run ended (stoppedEarly: on the cancel flag)
@@ -75,7 +83,8 @@ private:
 
   Scene& scene_;
   const Configuration configuration_;
-  NodeSelector *mesh_, *preopLabels_, *intraopLabels_, *intraop_, *transform_;
+  NodeSelector *mesh_, *preopLabels_, *intraopLabels_, *intraop_, *transform_, *preop_;
+  QCheckBox* blockMatching_;
   QSpinBox* ranks_;
   StageRunControls* controls_;
   std::shared_ptr<ProgressBoard> board_;               ///< the running run's

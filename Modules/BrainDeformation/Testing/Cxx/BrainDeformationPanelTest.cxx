@@ -4,10 +4,9 @@
 // rigid transform and the displacements on the mesh, with the bar at its end; an empty
 // segmentation is the logic's error in the panel, the scene untouched; a finite element worker
 // that dies mid-run is reported in the panel, the scene untouched, and the panel runs again.
-#include "BrainShiftCaseSimulator.h"
-#include "BrainShiftTestingSupport.h"
 #include "BrainDeformationPanel.h"
-#include "LabelMapMesher.h"
+#include "BrainDeformationTestScene.h"
+#include "BrainShiftTestingSupport.h"
 
 #include <vtkDataArray.h>
 #include <vtkPointData.h>
@@ -30,16 +29,11 @@ int BrainDeformationPanelTest(int argc, char* argv[])
     CaseParameters parameters;
     parameters.size = CaseSize::Small;
     const SimulatedCase c = simulateCase(parameters);
-    MeshingParameters meshing;
-    meshing.resolutionMm = 5.0;
-    const LabelMapMesh mesh = meshLabelMap(*c.preopLabels, meshing);
-
     Scene scene;
-    auto meshNode = scene.add(ModelNode::create("mesh", mesh.mesh));
-    scene.add(LabelMapVolumeNode::create("preop labels", c.preopLabels));
-    auto intraopLabels = scene.add(LabelMapVolumeNode::create("intraop labels", c.intraopLabels));
-    scene.add(ScalarVolumeNode::create("intraop image", c.intraopImage));
-    auto rigid = scene.add(TransformNode::create("rigid intraop_to_preop", c.rigidIntraopToPreop));
+    const testing::BrainDeformationTestNodes nodes = testing::addSmallDeformationCase(scene, c);
+    const auto& meshNode = nodes.mesh;
+    const auto& intraopLabels = nodes.intraopLabels;
+    const auto& rigid = nodes.rigid;
     BrainDeformationPanel panel(scene);
     // The ranks (and the surface's and the solve's parameters) are the configuration's.
     BS_CHECK(panel.ranksBox()->value() == Configuration{}.ranks);
