@@ -586,7 +586,7 @@ void TissueClassificationParameters::validate() const
     throw InputError("classification: " + std::to_string(prototypesPerClass) + " prototypes per class is fewer than k = " + std::to_string(k));
   }
   if (!(prototypeErosionMm >= 0) || !(fluidOpeningMm >= 0) || !(smallHoleMl >= 0) || !(gapReachMm >= 0) || !(cavityReachMm >= 0)) {
-    throw InputError("classification: erosion, opening, gap reach and hole size must be non-negative");
+    throw InputError("classification: erosion, opening, gap and cavity reach and hole size must be non-negative");
   }
 }
 
@@ -1027,7 +1027,8 @@ private:
 /// The gaps and cavities take the fluid they reach through fluid: from their voxels (`gaps`), over
 /// face neighbours, the `fluid` the k-NN calls parenchyma or tumour (not ventricles: moved, they lie
 /// where tissue was) within P.gapReachMm of path (at least one voxel step along every axis, so a
-/// 2.5 mm slice can be crossed), where the preoperative image showed tissue.
+/// 2.5 mm slice can be crossed; P.cavityReachMm where the spatial prior's tumour is within
+/// P.saturationMm and `tumourResected`), where the preoperative image showed tissue.
 /// That is the sheet of fluid pooled over a brain that sank (brain before it sank); sulci and
 /// cisterns next to a gap were fluid before surgery too and stay brain. Returns the voxels taken.
 std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid, const std::vector<std::size_t>& gaps, bool tumourResected,
@@ -1041,7 +1042,7 @@ std::size_t joinFluidToGaps(const ClassificationWork& w, const MaskImage& fluid,
   const PreoperativeTissueLook showedTissue(w, look);
   const auto spacing = w.intraop.GetSpacing();
   const float reach = float(std::max({w.P.gapReachMm, spacing[0], spacing[1], spacing[2]}) + 1e-3);
-  // Around a resection cavity (within the spatial channels' saturation of the aligned tumour) the
+  // Around a resection cavity (within the spatial channels' saturation of the prior's tumour) the
   // reach is the cavity's: the cavity and the gap are one body of fluid, and a long reach from the
   // cavity takes the tissue around it.
   const float cavityReach = float(std::max({w.P.cavityReachMm, spacing[0], spacing[1], spacing[2]}) + 1e-3);

@@ -149,8 +149,9 @@ struct TissueClassificationParameters {
   /// (T2: the cortex with its CSF looks like fluid there): no growth.
   std::optional<PreoperativeImageLook> preopLook;
   double gapReachMm = 6.0;
-  /// The reach around a resected tumour (within saturationMm of where the rigid prior puts it): the
-  /// cavity and the gap are one body of fluid there, and a long reach takes the tissue around the cavity.
+  /// The reach around a resected tumour (within saturationMm of where the spatial prior puts it: the
+  /// rigid prior, or in a refine pass the warped labels): the cavity and the gap are one body of
+  /// fluid there, and a long reach takes the tissue around the cavity.
   double cavityReachMm = 3.0;
   std::uint64_t seed = 2000;
   TumourResection tumourResection = TumourResection::Auto;

@@ -330,7 +330,7 @@ TumourSecondLook lookWhereSolved(RunContext& context, const SolvedMesh& solved)
     std::snprintf(line, sizeof(line), "refine: the tumour's resection is uncertain: where the first solve put it, %.0f %% of it looks like "
                   "fluid but %.0f %% like air, as a cystic or necrotic tumour in place would; kept in place "
                   "(--tumour-resected yes if it was resected)", 100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
-    context.report().addWarning(line);
+    check.warning = line;
   }
   return check;
 }
@@ -358,7 +358,7 @@ void runTumourDecisionPass(RunContext& context, bool resected)
 
 bool secondLookResectsTumour(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName)
 {
-  if (context.repeatPass()) return false;
+  if (context.repeatPass() || !context.wholePipeline()) return false;
   const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm");
   SolvedMesh solved{meshName, firstSolve, readTransform(rigidFile)};
   if (!isLinearTransform(solved.rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
@@ -386,6 +386,7 @@ void runRefineStage(RunContext& context)
   // pass that follows); else the look is on the solve as written.
   std::optional<TumourSecondLook> looked = context.takeTumourSecondLook();
   const TumourSecondLook tumour = looked ? std::move(*looked) : lookWhereSolved(context, solvedMeshAndRigid(context));
+  if (!tumour.warning.empty()) context.report().addWarning(tumour.warning);
   nlohmann::json tumourEntry = tumour.entry;
   if (tumour.resected) {
     Stopwatch decisionClock;

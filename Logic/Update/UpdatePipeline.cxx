@@ -391,6 +391,7 @@ std::string nonrigidUpdateTrustIn(const nlohmann::json& report)
 void runPipeline(RunContext& context)
 {
   Stopwatch clock;
+  context.setWholePipeline(true);
   for (const PipelineStage& stage : pipelineStages()) {
     if (!stage.run) {
       throw NotAvailableError("stage '" + stage.name + "' (" + stage.summary.substr(0, stage.summary.find(" (")) +

@@ -84,6 +84,7 @@ struct SerialScanSession {
 struct TumourSecondLook {
   nlohmann::json entry = nullptr; ///< null: not looked at (no tumour, told, or resected already)
   bool resected = false;
+  std::string warning; ///< the vote says resected without air: kept in place, said when the look is taken
 };
 
 /// One run of stages on one case: its options, configuration and report, and its inputs, each read
@@ -135,10 +136,10 @@ public:
   void joinSession(SerialScanSession& session) { session_ = &session; }
   SerialScanSession* session() const { return session_; }
   /// What the stages keep between their passes: the watch session (kept between scans too), or
-  /// this run's own (its worker, started by the first solve and kept for the later ones: the block
-  /// matches' solve, the refine stage's passes, the tumour's second look solve the same mesh,
-  /// partitioned and assembled once; the preoperative tissue maps, classified against again). The
-  /// run's own stops its worker when the run ends.
+  /// this run's own (its worker, started by the first solve with block matching and kept for the
+  /// later ones: the block matches' solve, the refine stage's passes, the tumour's second look
+  /// solve the same mesh, partitioned and assembled once; the preoperative tissue maps, classified
+  /// against again). The run's own stops its worker when the run ends.
   SerialScanSession& kept() { return session_ ? *session_ : keptByRun_; }
   /// The refine stage's spatial prior: the preoperative labels warped onto the intraoperative grid
   /// by the last solve (classify then uses them with the identity instead of the preoperative labels
@@ -168,6 +169,10 @@ public:
   /// block matches): the refine stage takes it instead of looking again.
   void keepTumourSecondLook(TumourSecondLook look) { tumourSecondLook_ = std::move(look); }
   std::optional<TumourSecondLook> takeTumourSecondLook() { return std::exchange(tumourSecondLook_, std::nullopt); }
+  /// The whole pipeline runs (runPipeline: `register`, `watch`, `demo`), so the refine stage follows
+  /// the simulate stage in this run; a stage run alone is not.
+  void setWholePipeline(bool whole) { wholePipeline_ = whole; }
+  bool wholePipeline() const { return wholePipeline_; }
   /// Another pass over this scan (the refine stage's): the surface stage starts from the
   /// preoperative boundary this scan's own surface holds.
   void setRepeatPass(bool repeat) { repeatPass_ = repeat; }
@@ -200,6 +205,7 @@ private:
   LabelImage::Pointer anchorLabels_;
   std::optional<HeldTumourDecision> heldTumourDecision_;
   bool repeatPass_ = false;
+  bool wholePipeline_ = false;
   std::optional<TumourSecondLook> tumourSecondLook_;
   StageProducts products_;
   std::optional<DisplacementEvidence> solveEvidence_;
@@ -270,7 +276,8 @@ void runRefineStage(RunContext& context); ///< RefineStage.cxx
 /// (`firstSolve`, its displacements attached; `meshName` names it in errors): whether it finds the
 /// tumour resected where that solve puts it. Then the look is kept for the refine stage, which
 /// classifies and solves again with the tumour resected; else the refine stage looks again on the
-/// scan's final solve. False in the refine stage's own passes.
+/// scan's final solve (and this look leaves nothing behind). False in the refine stage's own
+/// passes, and where no refine stage follows in this run (a stage run alone).
 bool secondLookResectsTumour(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName);
 /// The tumour's evidence as report.json keeps it (null without a tumour).
 nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& evidence);

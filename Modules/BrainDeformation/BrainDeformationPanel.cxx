@@ -149,6 +149,7 @@ FiniteElementResult solveWithBlockMatches(const DeformationInputs& in, FiniteEle
   job.solverOptions = solverOptionsForRepeatedSolves(job.solverOptions);
   FiniteElementSession session(job, options);
   const FiniteElementResult surfaceOnly = session.solve(job.fixedDisplacements);
+  throwIfCancelled(options.cancel, "brain deformation");
   report("block matching", 0.0);
   ImageDrivenSolveInputs inputs;
   inputs.preopImage = in.preopImage.GetPointer();

@@ -8,9 +8,10 @@
 // DisplacementMagnitude, under the rigid transform: the contract's model frame) and the mesh's
 // point arrays Displacement and DisplacementMagnitude.
 //
-// Progress and Cancel: the surface stage and the block matching report no fraction and stop at
-// their next step; the solve reports its stages and fractions, and Cancel stops the worker's ranks
-// (the solver terminates them). One flag, the run's (BackgroundRun.h), cancels all.
+// Progress and Cancel: the surface stage and the block matching report no fraction; the surface
+// stops at its next iteration, the block matching runs to its end (Cancel takes effect before it
+// and at the solve after it); the solve reports its stages and fractions, and Cancel stops the
+// worker's ranks (the solver terminates them). One flag, the run's (BackgroundRun.h), cancels all.
 #include "Configuration.h"
 #include "NodeSelector.h"
 #include "StageRunControls.h"
