@@ -134,6 +134,13 @@ double meanChange(const std::vector<double>& a, const std::vector<double>& b)
 }
 } // namespace
 
+std::size_t keptSoftConstraints(const FiniteElementResult& result)
+{
+  std::size_t kept = 0;
+  for (std::uint8_t k : result.softConstraintKept) kept += k;
+  return kept;
+}
+
 ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& surfaceOnly,
                                        const ImageDrivenSolveInputs& in, const Configuration& configuration,
                                        const ConstrainedSolve& solve)

@@ -77,6 +77,9 @@ struct ImageDrivenSolve {
   DisplacementEvidence evidence;
 };
 
+/// How many of its soft constraints a solve kept (the last round's; 0 without constraints).
+std::size_t keptSoftConstraints(const FiniteElementResult& result);
+
 /// Solves a job (with soft constraints) as the caller solves: one-shot or in a served worker.
 using ConstrainedSolve = std::function<FiniteElementResult(const FiniteElementJob&)>;
 

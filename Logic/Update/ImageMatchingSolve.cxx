@@ -112,8 +112,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
               matching.remapSeconds + matching.selectionSeconds + matching.matchingSeconds);
   if (solved.used) {
     const FiniteElementResult& result = solved.result;
-    std::size_t kept = 0;
-    for (std::uint8_t k : result.softConstraintKept) kept += k;
+    const std::size_t kept = keptSoftConstraints(result);
     entry["kept"] = kept;
     entry["rejected"] = solved.constraints.constraints.size() - kept;
     entry["solves"] = result.keptPerRound.size();

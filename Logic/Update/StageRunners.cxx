@@ -424,8 +424,9 @@ void runSimulateStage(RunContext& context)
   } else if (configuration.blockMatching.enabled) {
     // A first solve the tumour's second look replaces (finding the tumour resected where this
     // solve puts it, the refine stage classifies and solves again) is the surface's alone: the pass
-    // after it matches the blocks. (The refine stage's passes keep the first solve's matches: the
-    // labels it warps are their prior, and without them the T2 scans lost 0.05-0.13 mm mean.)
+    // after it matches the blocks. (Before the refine stage's passes, by contrast, the first solve
+    // matches its blocks: the labels it warps are their prior, and solved by the surface alone it
+    // cost the T2 scans 0.05-0.13 mm mean.)
     attachDisplacements(mesh, surfaceOnly);
     if (secondLookResectsTumour(context, mesh, meshFile.string())) {
       const std::string why = "the tumour is resected where the surface's solve puts it: the refine stage classifies and solves again";

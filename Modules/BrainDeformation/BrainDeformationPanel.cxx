@@ -14,7 +14,6 @@
 #include <QTimer>
 #include <QVBoxLayout>
 
-#include <cstdint>
 #include <functional>
 #include <optional>
 
@@ -218,10 +217,8 @@ QString doneMessage(const DeformationOutcome& o)
 {
   QString matches;
   if (o.matched && o.matched->used) {
-    std::size_t kept = 0;
-    for (std::uint8_t k : o.solved.softConstraintKept) kept += k;
     matches = BrainDeformationPanel::tr(" %1 of %2 block matches kept, misfit %3 -> %4 mm;")
-                .arg(kept)
+                .arg(keptSoftConstraints(o.solved))
                 .arg(o.matched->matching.matches.size())
                 .arg(o.matched->rmsMisfitSurfaceOnlyMm, 0, 'f', 2)
                 .arg(o.solved.rmsMisfitPerRoundMm.empty() ? 0.0 : o.solved.rmsMisfitPerRoundMm.back(), 0, 'f', 2);
@@ -259,7 +256,6 @@ void BrainDeformationPanel::run()
     controls_->setStatus(tr("Choose a tetrahedral mesh, both label maps, the intraoperative volume and the rigid transform first."));
     return;
   }
-
   DeformationInputs inputs;
   inputs.mesh = vtkSmartPointer<vtkUnstructuredGrid>::New();
   inputs.mesh->DeepCopy(meshData);
