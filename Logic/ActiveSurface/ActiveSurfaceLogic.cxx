@@ -1331,6 +1331,52 @@ ActiveSurfaceParameters activeSurfaceParametersFrom(const Configuration& configu
   return parameters;
 }
 
+namespace {
+/// The mesh's brain surface and its membrane, I + tau (alpha K + beta K^2) with K the surface's
+/// graph Laplacian, factorised once: what the preoperative and the intraoperative fits move.
+struct SurfaceMembrane {
+  std::set<int> brain;
+  MeshContents contents;
+  BrainSurface surface;
+  Eigen::SparseMatrix<double> laplacian;
+  MembraneStep membrane;
+
+  SurfaceMembrane(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const ActiveSurfaceParameters& p, const std::string& meshName)
+    : brain(p.brainLabels.begin(), p.brainLabels.end())
+    , contents(meshContentsOf(mesh, cellLabels, brain, p, meshName))
+    , surface(brainSurfaceOf(mesh, contents.meshedBrain, meshName))
+    , laplacian(graphLaplacian(surface.topology, surface.size()))
+    , membrane(laplacian, p)
+  {
+    if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
+  }
+};
+} // namespace
+
+PreoperativeBrainBoundary preoperativeBrainBoundary(vtkUnstructuredGrid* mesh, const LabelImage& preopLabels, const ActiveSurfaceParameters& p,
+                                                    const ActiveSurfaceInputNames& names)
+{
+  p.validate();
+  const auto start = std::chrono::steady_clock::now();
+  vtkDataArray* cellLabels = mesh ? mesh->GetCellData()->GetArray("Label") : nullptr;
+  if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
+  // As deformBrainSurface's first steps: the same surface, membrane and fit.
+  const SurfaceMembrane model(mesh, cellLabels, p, names.mesh);
+  const BrainSurface& surface = model.surface;
+  const std::size_t n = surface.size();
+  const Eigen::MatrixXd smoothedStart = taubinSmoothed(rowsOf(surface.points), model.laplacian, p.restSmoothingIterations);
+  const FitOutcome fit = fitPreopBoundary(preopLabels, surface, model.brain, model.membrane, smoothedStart, p, names.preopLabels);
+  PreoperativeBrainBoundary boundary;
+  ActiveSurfaceResult figures;
+  boundary.surface = deformedSurface(surface, Eigen::MatrixXd::Zero(Eigen::Index(n), 3), fit.positions,
+                                     std::vector<unsigned char>(n, Matched), figures);
+  figures.converged = true; // no intraoperative fit here: only the preoperative one can fail to converge
+  warnIfNotConverged(fit, true, p, figures);
+  boundary.warnings = figures.warnings;
+  boundary.seconds = secondsSince(start);
+  return boundary;
+}
+
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,
                                        const ScalarImage* intraopImage, const SpatialTransform& rigidIntraopToPreop,
                                        const ActiveSurfaceParameters& p, const ActiveSurfaceInputNames& names,
@@ -1341,16 +1387,14 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   vtkDataArray* cellLabels = checkedCellLabels(mesh, intraopLabels, intraopImage, rigidIntraopToPreop, names);
   const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
 
-  // -- The preoperative brain surface, and what is known of its nodes.
-  const std::set<int> brain(p.brainLabels.begin(), p.brainLabels.end());
-  const MeshContents contents = meshContentsOf(mesh, cellLabels, brain, p, names.mesh);
-  const BrainSurface surface = brainSurfaceOf(mesh, contents.meshedBrain, names.mesh);
+  // -- The preoperative brain surface, what is known of its nodes, and its membrane.
+  const SurfaceMembrane model(mesh, cellLabels, p, names.mesh);
+  const std::set<int>& brain = model.brain;
+  const MeshContents& contents = model.contents;
+  const BrainSurface& surface = model.surface;
+  const Eigen::SparseMatrix<double>& laplacian = model.laplacian;
+  const MembraneStep& membrane = model.membrane;
   const std::size_t n = surface.size();
-
-  // -- The membrane: I + tau (alpha K + beta K^2), K the surface's graph Laplacian, factorised once.
-  const Eigen::SparseMatrix<double> laplacian = graphLaplacian(surface.topology, n);
-  const MembraneStep membrane(laplacian, p);
-  if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
   const Eigen::MatrixXd initialPositions = rowsOf(surface.points);
 
   // -- Where the preoperative brain boundary is at each node. The lattice's nodes are only near

@@ -167,4 +167,18 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
                                        const ActiveSurfaceParameters& parameters,
                                        const ActiveSurfaceInputNames& names = {}, vtkPolyData* previousSurface = nullptr);
 
+/// The brain surface of `mesh` at the preoperative brain boundary, found on the preoperative labels
+/// as deformBrainSurface finds it (its first step, and the most costly): a surface without
+/// displacement (every node "Imposed" at rest) whose "PreopBoundary" deformBrainSurface takes as
+/// its `previousSurface` instead of fitting again. It needs the preoperative data alone, so it can
+/// be made while the scan is still registered and classified. The same inputs errors as
+/// deformBrainSurface's.
+struct PreoperativeBrainBoundary {
+  vtkSmartPointer<vtkPolyData> surface;
+  double seconds = 0;
+  Warnings warnings; ///< the fit did not converge
+};
+PreoperativeBrainBoundary preoperativeBrainBoundary(vtkUnstructuredGrid* mesh, const LabelImage& preopLabels,
+                                                    const ActiveSurfaceParameters& parameters, const ActiveSurfaceInputNames& names = {});
+
 } // namespace brainshift

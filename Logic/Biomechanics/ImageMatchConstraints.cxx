@@ -156,8 +156,10 @@ ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteEl
   };
   BlockMatchingParameters parameters = blockMatchingParametersFrom(configuration, in.tumourResected);
   parameters.largestPredictedMm = std::min(largestDisplacement(surfaceOnly.displacements), 200.0);
-  out.matching = matchBlocks(*in.preopImage, *in.preopLabels, *in.intraopImage, *in.intraopLabels, *in.rigidIntraopToPreop, prediction,
-                             parameters);
+  out.matching = in.earlierMatching
+                   ? matchesStillInBrain(*in.earlierMatching, *in.preopImage, *in.intraopLabels, *in.rigidIntraopToPreop, parameters)
+                   : matchBlocks(*in.preopImage, *in.preopLabels, *in.intraopImage, *in.intraopLabels, *in.rigidIntraopToPreop,
+                                 prediction, parameters);
   out.constraints = softConstraintsFromMatches(locator, out.matching.matches, configuration.blockMatching.stiffnessNPerMm);
   if (out.constraints.constraints.empty()) return out;
   FiniteElementJob constrained = job;

@@ -64,6 +64,10 @@ struct ImageDrivenSolveInputs {
   const LabelImage* intraopLabels = nullptr; ///< the scan's classification
   const SpatialTransform* rigidIntraopToPreop = nullptr;
   bool tumourResected = false;
+  /// An earlier matching of this scan with the same tumour decision (a refine pass's solve): its
+  /// matches held against `intraopLabels` (matchesStillInBrain) instead of matching again. Null:
+  /// match anew.
+  const BlockMatchingResult* earlierMatching = nullptr;
 };
 
 struct ImageDrivenSolve {
@@ -84,7 +88,7 @@ std::size_t keptSoftConstraints(const FiniteElementResult& result);
 using ConstrainedSolve = std::function<FiniteElementResult(const FiniteElementJob&)>;
 
 /// After Clatz et al. (2005): blocks matched from the surface-driven solution `surfaceOnly` of
-/// `job` on `mesh`, then `job` solved again through `solve` with the matches as soft constraints,
+/// `job` on `mesh` (or the earlier matching's, still in the brain), then `job` solved again through `solve` with the matches as soft constraints,
 /// the worst rejected in rounds. std::invalid_argument when an input is missing.
 ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& surfaceOnly,
                                        const ImageDrivenSolveInputs& inputs, const Configuration& configuration,

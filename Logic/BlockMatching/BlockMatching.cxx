@@ -506,7 +506,71 @@ void matchCandidates(const MatchingContext& context, const ScalarImage& grid, co
   }
 }
 
+/// The matching grid's spacing per axis and the block's half-size in its voxels, as matchBlocks
+/// sets them for `preopImage`.
+std::pair<std::array<double, 3>, int> blockLattice(const ScalarImage& preopImage, const BlockMatchingParameters& parameters)
+{
+  std::array<double, 3> spacing{};
+  for (unsigned d = 0; d < 3; ++d) spacing[d] = std::max(preopImage.GetSpacing()[d], parameters.gridSpacingMm);
+  const double largest = std::max({spacing[0], spacing[1], spacing[2]});
+  return {spacing, std::max(1, int(std::lround(parameters.blockHalfSizeMm / largest)))};
+}
+
 } // namespace
+
+BlockMatchingResult matchesStillInBrain(const BlockMatchingResult& earlier, const ScalarImage& preopImage, const LabelImage& intraopLabels,
+                                        const SpatialTransform& rigidIntraopToPreop, const BlockMatchingParameters& parameters)
+{
+  requireSensible(parameters);
+  const auto clock = Clock::now();
+  const auto preopToIntraop = rigidIntraopToPreop.GetInverseTransform();
+  if (!preopToIntraop) throw std::invalid_argument("block matching: the rigid transform cannot be inverted");
+  const auto [spacing, h] = blockLattice(preopImage, parameters);
+  const auto& direction = preopImage.GetDirection();
+  const auto size = intraopLabels.GetLargestPossibleRegion().GetSize();
+  const LabelPixel* labels = intraopLabels.GetBufferPointer();
+  // The scan's continuous index of a preoperative point.
+  auto indexOf = [&](const PhysicalPoint& x) {
+    const auto c = intraopLabels.TransformPhysicalPointToContinuousIndex<double>(preopToIntraop->TransformPoint(x));
+    return std::array<double, 3>{c[0], c[1], c[2]};
+  };
+  BlockMatchingResult result = earlier;
+  result.matches.clear();
+  for (const BlockMatch& match : earlier.matches) {
+    // The matched block's centre and its axes' steps, in the scan's indices (the rigid map is affine).
+    PhysicalPoint at;
+    for (unsigned a = 0; a < 3; ++a) at[a] = match.centre[a] + match.displacement[a];
+    const std::array<double, 3> base = indexOf(at);
+    std::array<std::array<double, 3>, 3> step{};
+    for (unsigned d = 0; d < 3; ++d) {
+      PhysicalPoint next = at;
+      for (unsigned a = 0; a < 3; ++a) next[a] += direction(a, d) * spacing[d];
+      const std::array<double, 3> n = indexOf(next);
+      for (unsigned a = 0; a < 3; ++a) step[d][a] = n[a] - base[a];
+    }
+    std::size_t brain = 0, total = 0;
+    for (int k = -h; k <= h; ++k)
+      for (int j = -h; j <= h; ++j)
+        for (int i = -h; i <= h; ++i, ++total) {
+          std::array<long, 3> index{};
+          bool inside = true;
+          for (unsigned a = 0; a < 3; ++a) {
+            index[a] = std::lround(base[a] + i * step[0][a] + j * step[1][a] + k * step[2][a]);
+            inside = inside && index[a] >= 0 && index[a] < long(size[a]);
+          }
+          if (inside) brain += isBrain(parameters.brainLabels, labels[std::size_t(index[0]) + size[0] * (std::size_t(index[1]) + size[1] * std::size_t(index[2]))]);
+        }
+    if (double(brain) < parameters.minimumBrainShare * double(total)) {
+      ++result.outsideBrain;
+    } else {
+      result.matches.push_back(match);
+    }
+  }
+  result.remapSeconds = 0;
+  result.matchingSeconds = 0;
+  result.selectionSeconds = secondsSince(clock);
+  return result;
+}
 
 BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage& preopLabels, const ScalarImage& intraopImage,
                                 const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
@@ -523,7 +587,7 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
   clock = Clock::now();
   const GridGeometry geometry = geometryOf(*volumes.grid);
   const double spacing = std::max({geometry.spacing[0], geometry.spacing[1], geometry.spacing[2]});
-  const int h = std::max(1, int(std::lround(parameters.blockHalfSizeMm / spacing)));
+  const int h = blockLattice(preopImage, parameters).second;
   const int stride = std::max(1, int(std::lround(parameters.blockSpacingMm / spacing)));
   const std::vector<std::array<int, 3>> candidates = selectCandidates(volumes, h, stride, parameters, result.candidates);
   result.selected = candidates.size();

@@ -78,4 +78,14 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
                                 const LabelImage& intraopLabels, const SpatialTransform& rigidIntraopToPreop,
                                 const DisplacementPrediction& prediction, const BlockMatchingParameters& parameters);
 
+/// The matches of an earlier matching of the same scan (the same images and rigid transform) held
+/// against a new classification of it, `intraopLabels` (on the scan's grid): those whose matched
+/// block is still brain (`minimumBrainShare` of its voxels), the others counted outside the brain.
+/// A refine pass's solve keeps the image's correspondences without matching again (they do not
+/// depend on the classification but for this check). `preopImage` gives the blocks' axes and the
+/// matching grid's spacing, as matchBlocks set them. The earlier counts are kept; its seconds are
+/// this check's (as the selection's).
+BlockMatchingResult matchesStillInBrain(const BlockMatchingResult& earlier, const ScalarImage& preopImage, const LabelImage& intraopLabels,
+                                        const SpatialTransform& rigidIntraopToPreop, const BlockMatchingParameters& parameters);
+
 } // namespace brainshift

@@ -209,7 +209,7 @@ struct FirstPass {
   void restateIn(RunReport& report) const
   {
     nlohmann::json surfaceNow = report.stage("surface");
-    for (const char* key : {"preop_boundary_from", "preop_boundary_seconds"}) {
+    for (const char* key : {"preop_boundary_from", "preop_boundary_seconds", "preop_boundary_made_ahead_seconds"}) {
       if (surface.contains(key)) surfaceNow[key] = surface[key];
     }
     report.setStage("surface", surfaceNow);

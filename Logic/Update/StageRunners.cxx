@@ -10,7 +10,6 @@
 #include "VolumeNodes.h"
 
 #include <itkCompositeTransform.h>
-#include <itkEuler3DTransform.h>
 #include <itkIdentityTransform.h>
 #include <itkImageRegionConstIteratorWithIndex.h>
 
@@ -21,6 +20,7 @@
 #include "FiniteElementSolver.h"
 #include "ImageMatchingSolve.h"
 #include "ParallelRanges.h"
+#include "PreparationAhead.h"
 #include "LabelMapMesher.h"
 #include "ModelIO.h"
 #include "RigidRegistrationLogic.h"
@@ -474,31 +474,29 @@ ActiveSurfaceParameters surfaceParametersFor(RunContext& context)
   return parameters;
 }
 
-/// The preoperative brain surface as the active surface finds it on the preoperative data alone
-/// (the preoperative image and labels as their own scan, through the identity). What a scan
-/// reuses of it is each node's preoperative boundary (PreopBoundary), found from the preoperative
-/// labels alone and the most costly part of the surface stage; its displacements only give the
-/// served worker a problem of the right shape to prepare on.
+/// The preoperative brain surface at each node's preoperative boundary (PreopBoundary), found from
+/// the preoperative labels alone: the most costly part of the surface stage, which every scan then
+/// reuses. Its nodes, imposed at rest, give the served worker a problem of the right shape to
+/// prepare on.
 void preparePreoperativeSurface(RunContext& context)
 {
   Stopwatch clock;
   const fs::path meshFile = context.output("mesh.vtu");
   vtkSmartPointer<vtkUnstructuredGrid> mesh = vtkUnstructuredGrid::SafeDownCast(context.products().readModel(meshFile));
   if (!mesh) throw InputError(meshFile.string() + ": not a tetrahedral mesh (vtkUnstructuredGrid)");
-  const LabelImage& labels = context.preopLabels("prepare");
-  const auto identity = itk::Euler3DTransform<double>::New();
   ActiveSurfaceInputNames names;
   names.mesh = meshFile.string();
-  names.labels = names.preopLabels = context.options().preopLabels.string();
-  names.rigid = "the identity";
-  const ActiveSurfaceResult result =
-    deformBrainSurface(mesh, &labels, labels, &context.preopImage("prepare"), *identity, surfaceParametersFor(context), names, nullptr);
-  context.products().writeModel(result.surface, context.output("brain_surface.vtp"));
+  names.preopLabels = context.options().preopLabels.string();
+  const PreoperativeBrainBoundary boundary =
+    preoperativeBrainBoundary(mesh, context.preopLabels("prepare"), surfaceParametersFor(context), names);
+  context.products().writeModel(boundary.surface, context.output("brain_surface.vtp"));
+  const vtkIdType nodes = boundary.surface->GetNumberOfPoints();
   context.report().setStage("preoperative_surface", {{"wall_seconds", clock.seconds()},
-                                                     {"surface_nodes", result.surfaceNodes},
-                                                     {"imposed_nodes", result.imposedNodes},
-                                                     {"preop_boundary_seconds", result.preopBoundarySeconds}});
-  context.say("prepare: the preoperative brain boundary at %zu surface nodes, %.2f s\n", result.surfaceNodes, clock.seconds());
+                                                     {"surface_nodes", nodes},
+                                                     {"imposed_nodes", nodes},
+                                                     {"preop_boundary_seconds", boundary.seconds}});
+  context.report().addWarnings(boundary.warnings);
+  context.say("prepare: the preoperative brain boundary at %lld surface nodes, %.2f s\n", static_cast<long long>(nodes), clock.seconds());
 }
 
 /// The session's served worker, partitioned and assembled on the prepared mesh before the first
@@ -586,7 +584,11 @@ void runMeshStage(RunContext& context)
     context.say("mesh: %lld nodes, reused from the previous scan, %.2f s\n", entry.value("nodes", 0LL), clock.seconds());
     return;
   }
-  const LabelMapMesh result = meshLabelMap(context.preopLabels("mesh"), parameters);
+  // Made beside the rigid registration and the classification in this run, or made here.
+  PreparationAhead* ahead = context.preparationAhead();
+  LabelMapMesh madeHere;
+  if (!ahead) madeHere = meshLabelMap(context.preopLabels("mesh"), parameters);
+  const LabelMapMesh& result = ahead ? ahead->mesh(context.cancelFlag()) : madeHere;
   context.products().writeModel(result.mesh, context.output("mesh.vtu"));
   const MeshQuality& q = result.quality;
   nlohmann::json volumes = nlohmann::json::object(), voxels = nlohmann::json::object();
@@ -609,15 +611,55 @@ void runMeshStage(RunContext& context)
                                      {"inverted_tetrahedra", q.invertedOrFlat},
                                      {"radius_ratio_histogram", q.radiusRatioHistogram},
                                      {"volume_ml", volumes},
-                                     {"voxel_volume_ml", voxels}});
+                                     {"voxel_volume_ml", voxels},
+                                     {"made_ahead_seconds", ahead ? nlohmann::json(ahead->meshSeconds()) : nlohmann::json()}});
   context.report().addWarnings(result.warnings);
-  context.say("mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
-              q.minimumDihedralDegrees, q.maximumDihedralDegrees, clock.seconds());
+  if (ahead) {
+    context.say("mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, made in %.2f s beside the rigid registration, "
+                "%.2f s here\n",
+                q.nodes, q.tetrahedra, q.minimumDihedralDegrees, q.maximumDihedralDegrees, ahead->meshSeconds(), clock.seconds());
+  } else {
+    context.say("mesh: %zu nodes, %zu tetrahedra, dihedral %.0f to %.0f degrees, %.2f s\n", q.nodes, q.tetrahedra,
+                q.minimumDihedralDegrees, q.maximumDihedralDegrees, clock.seconds());
+  }
 }
 
 } // namespace brainshift
 
 namespace brainshift {
+
+namespace {
+/// The preoperative boundary the surface stage need not fit again, when one is known: this scan's
+/// own in a refine pass, the previous scan's on the same mesh, or the one made beside this run's
+/// rigid registration; else none (`surface` null, `from` empty).
+struct KnownPreoperativeBoundary {
+  vtkSmartPointer<vtkPolyData> surface;
+  std::string from;
+  double madeAheadSeconds = 0;
+};
+
+KnownPreoperativeBoundary knownPreoperativeBoundary(RunContext& context)
+{
+  KnownPreoperativeBoundary known;
+  std::optional<fs::path> file = context.previousFile("brain_surface.vtp");
+  const bool samePass = context.repeatPass(); // refine: this scan's own surface, same mesh
+  if (samePass) file = context.output("brain_surface.vtp");
+  const bool meshReused = context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from");
+  if (file && (samePass || meshReused)) {
+    known.surface = vtkPolyData::SafeDownCast(context.products().readModel(*file));
+    if (!known.surface) throw InputError(file->string() + ": not a surface (vtkPolyData)");
+    if (!known.surface->GetPointData()->GetArray("PreopBoundary")) return {}; // an older run's: fit again
+    known.from = file->string();
+  } else if (PreparationAhead* ahead = context.preparationAhead(); ahead && !samePass) {
+    const PreoperativeBrainBoundary& prepared = ahead->boundary(context.cancelFlag());
+    known.surface = prepared.surface;
+    known.from = "made beside the rigid registration";
+    known.madeAheadSeconds = prepared.seconds;
+    context.report().addWarnings(prepared.warnings);
+  }
+  return known;
+}
+} // namespace
 
 void runSurfaceStage(RunContext& context)
 {
@@ -643,17 +685,9 @@ void runSurfaceStage(RunContext& context)
   names.labels = labelsFile.string();
   names.rigid = rigidFile.string();
   names.preopLabels = context.options().preopLabels.string();
-  // A later scan on the same mesh reuses the preoperative boundary the previous scan found.
-  vtkSmartPointer<vtkPolyData> previousSurface;
-  std::optional<fs::path> previousSurfaceFile = context.previousFile("brain_surface.vtp");
-  const bool samePass = context.repeatPass(); // refine: this scan's own surface, same mesh
-  if (samePass) previousSurfaceFile = context.output("brain_surface.vtp");
-  if (previousSurfaceFile && (samePass || (context.report().hasStage("mesh") && context.report().stage("mesh").contains("reused_from")))) {
-    previousSurface = vtkPolyData::SafeDownCast(context.products().readModel(*previousSurfaceFile));
-    if (!previousSurface) throw InputError(previousSurfaceFile->string() + ": not a surface (vtkPolyData)");
-    if (!previousSurface->GetPointData()->GetArray("PreopBoundary")) previousSurface = nullptr; // an older run's: fit again
-    names.previousSurface = previousSurfaceFile->string();
-  }
+  const KnownPreoperativeBoundary known = knownPreoperativeBoundary(context);
+  vtkSmartPointer<vtkPolyData> previousSurface = known.surface;
+  if (previousSurface) names.previousSurface = known.from;
   const ActiveSurfaceResult result = deformBrainSurface(mesh, &context.preopLabels("surface"), *labels,
                                                         &context.intraopImage("surface"), *rigid, parameters, names, previousSurface);
   context.products().writeModel(result.surface, context.output("brain_surface.vtp"));
@@ -686,7 +720,8 @@ void runSurfaceStage(RunContext& context)
                                         {"directional_nodes", result.directionalNodes},
                                         {"unsnapped_nodes", result.unsnappedNodes},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
-                                        {"preop_boundary_from", previousSurface ? previousSurfaceFile->string() : std::string()},
+                                        {"preop_boundary_from", known.from},
+                                        {"preop_boundary_made_ahead_seconds", known.madeAheadSeconds},
                                         {"target_seconds", result.targetSeconds},
                                         {"iteration_seconds", result.iterationSeconds}});
   context.report().addWarnings(result.warnings);

@@ -1,5 +1,7 @@
 #include "UpdatePipeline.h"
 
+#include "PreparationAhead.h"
+
 #include "BrainShiftErrors.h"
 #include "LabelContract.h"
 #include "OutputFolder.h"
@@ -392,6 +394,13 @@ void runPipeline(RunContext& context)
 {
   Stopwatch clock;
   context.setWholePipeline(true);
+  // The mesh and the preoperative boundary, made on the core the rigid registration leaves idle;
+  // abandoned (and its thread joined) when the pipeline ends, however it ends.
+  context.setPreparationAhead(PreparationAhead::startFor(context));
+  struct Release {
+    RunContext& context;
+    ~Release() { context.setPreparationAhead(nullptr); }
+  } release{context};
   for (const PipelineStage& stage : pipelineStages()) {
     if (!stage.run) {
       throw NotAvailableError("stage '" + stage.name + "' (" + stage.summary.substr(0, stage.summary.find(" (")) +

@@ -87,6 +87,16 @@ struct TumourSecondLook {
   std::string warning; ///< the vote says resected without air: kept in place, said when the look is taken
 };
 
+struct BlockMatchingResult;
+class PreparationAhead;
+
+/// The block matches of this scan's last matching, and the tumour decision they were made under
+/// (a resected tumour's blocks are not matched).
+struct KeptBlockMatches {
+  std::shared_ptr<const BlockMatchingResult> matching;
+  bool tumourResected = false;
+};
+
 /// One run of stages on one case: its options, configuration and report, and its inputs, each read
 /// and checked once, when a stage first asks for it.
 class RunContext {
@@ -177,6 +187,14 @@ public:
   /// preoperative boundary this scan's own surface holds.
   void setRepeatPass(bool repeat) { repeatPass_ = repeat; }
   bool repeatPass() const { return repeatPass_ || warpedPrior_; }
+  /// The mesh and the preoperative boundary this run makes beside its first stages
+  /// (PreparationAhead, started by runPipeline); null: the mesh and surface stages make their own.
+  void setPreparationAhead(std::shared_ptr<PreparationAhead> ahead) { preparationAhead_ = std::move(ahead); }
+  PreparationAhead* preparationAhead() const { return preparationAhead_.get(); }
+  /// The block matches of this scan's last fresh matching: a refine pass's solve holds them
+  /// against its classification instead of matching again (under the same tumour decision).
+  void keepBlockMatches(KeptBlockMatches matches) { blockMatches_ = std::move(matches); }
+  const std::optional<KeptBlockMatches>& keptBlockMatches() const { return blockMatches_; }
   /// The evidence behind the last solve of this run (its imposed nodes and matches, with their
   /// misfits): the confidence map's, which the refine stage adds its passes' disagreement to.
   void setSolveEvidence(DisplacementEvidence evidence) { solveEvidence_ = std::move(evidence); }
@@ -207,6 +225,8 @@ private:
   bool repeatPass_ = false;
   bool wholePipeline_ = false;
   std::optional<TumourSecondLook> tumourSecondLook_;
+  std::optional<KeptBlockMatches> blockMatches_;
+  std::shared_ptr<PreparationAhead> preparationAhead_;
   StageProducts products_;
   std::optional<DisplacementEvidence> solveEvidence_;
   /// Last: its worker stops first, while what its progress and cancellation reach still lives.

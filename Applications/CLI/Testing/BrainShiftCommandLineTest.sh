@@ -253,6 +253,20 @@ SerialScans)
   # (the first scan with prototypes picked beforehand, as a user would: they are carried forward)
   "$brainshift" register "${inputs[@]}" --output-dir "$first" --prototypes "$demo/classification_prototypes.json" >/dev/null ||
     fail "first scan exited $?"
+  # A first scan meshes and fits the preoperative boundary beside its rigid registration and
+  # classification (PreparationAhead): the stages take them, with the same figures as when made in
+  # line (the mesh stage run alone below makes the same mesh).
+  float_check "$first/report.json" "['stages']['mesh']['made_ahead_seconds']" "> 0"
+  [ "$(json_value "$first/report.json" "['stages']['surface']['preop_boundary_from']")" = "made beside the rigid registration" ] ||
+    fail "the first scan did not take the preoperative boundary made beside its rigid registration"
+  float_check "$first/report.json" "['stages']['surface']['preop_boundary_made_ahead_seconds']" "> 0"
+  mkdir -p "$work/serial/mesh-alone"
+  "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$work/serial/mesh-alone" >/dev/null ||
+    fail "mesh alone exited $?"
+  for key in nodes tetrahedra min_dihedral_degrees; do
+    [ "$(json_value "$work/serial/mesh-alone/report.json" "['stages']['mesh']['$key']")" = \
+      "$(json_value "$first/report.json" "['stages']['mesh']['$key']")" ] || fail "the mesh made ahead differs in $key from the mesh stage's"
+  done
   "$brainshift" register "${inputs[@]}" --output-dir "$later" --previous "$first" >/dev/null || fail "later scan exited $?"
   [ "$(json_value "$later/report.json" "['stages']['rigid']['initialised_from']")" = "$first/rigid_intraop_to_preop.tfm" ] ||
     fail "the later scan's rigid registration did not start from the first's"
@@ -879,6 +893,11 @@ OtherContrast)
     fail "T2: the refine stage did not choose its pass from the contrast"
   [ "$(json_value "$r" "['stages']['classify']['tumour_evidence']['decided_by']")" = "the first classification (through the rigid prior)" ] ||
     fail "T2: the refine pass did not keep the first tumour decision"
+  # The refine pass keeps the first solve's block matches (the same tumour decision), held against
+  # its own classification: none matched anew, and some still in the brain.
+  [ "$(json_value "$r" "['stages']['simulate']['block_matching']['matches_from']")" = \
+    "this scan's earlier solve, held against this pass's classification" ] || fail "T2: the refine pass matched its blocks again"
+  float_check "$r" "['stages']['simulate']['block_matching']['kept']" "> 100"
   # The T2 case's segmentation moved 3 voxels (7.5 mm) along the first grid axis: rejected.
   mkdir -p "$other/t2-moved"
   shift_labels_along_first_axis "$other/t2/intraop_labels.nii.gz" "$other/t2-moved/intraop_labels.nii.gz"

@@ -3,8 +3,8 @@
 // brainshift-fe-worker --serve JOB: prepares the same problem (before surgery) and then answers
 // new imposed values for the same boundary nodes from standard input (during surgery).
 //
-// Every rank reads the job. The node graph is partitioned (PETSc's MatPartitioning, PT-Scotch when
-// there are several ranks; nodes weighted by the tetrahedra around them, which is the assembly
+// Every rank reads the job. The nodes are partitioned by recursive coordinate bisection, the same
+// on every rank and every run (nodes weighted by the tetrahedra around them, which is the assembly
 // work), nodes are renumbered so that each rank owns a contiguous block, each tetrahedron is
 // assembled by the owner of its first node, the fixed dofs are eliminated keeping the matrix
 // symmetric (MatZeroRowsColumns), and the system is solved by the tuned default (setTunedDefault:
@@ -18,12 +18,13 @@
 #include <petscksp.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <numeric>
-#include <set>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -69,11 +70,68 @@ struct Numbering {
   }
 };
 
+/// The ranks' parts of the nodes by recursive coordinate bisection, the same on every rank (each
+/// holds the whole job): the nodes split across the longest side of their bounding box where the
+/// work (the tetrahedra around each node, which is the assembly) divides in proportion to the
+/// ranks on either side, then each side again. Deterministic: the same job on the same ranks, the
+/// same parts, iterates and displacements to the last bit. (PT-Scotch, used before, breaks ties
+/// with a generator seeded anew each run and runs non-deterministic parallel coarsening: the same
+/// job got another partition each run, and a displacement a few 1e-5 mm off; Debian's build offers
+/// no deterministic mode.)
+std::vector<int> bisectedOwners(const FiniteElementJob& job, int size)
+{
+  const std::size_t n = job.nodeCount();
+  std::vector<double> work(n, 0.0);
+  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
+    for (int a = 0; a < 4; ++a) work[std::size_t(job.tetrahedra[4 * t + std::size_t(a)])] += 1;
+  }
+  for (double& w : work) w = std::max(w, 1.0);
+  std::vector<int> owner(n, 0);
+  std::vector<std::size_t> nodes(n);
+  std::iota(nodes.begin(), nodes.end(), std::size_t(0));
+  // Splits nodes[begin, end) among ranks [firstRank, firstRank + ranks).
+  std::function<void(std::size_t, std::size_t, int, int)> split = [&](std::size_t begin, std::size_t end, int firstRank, int ranks) {
+    if (ranks == 1 || end - begin <= 1) {
+      for (std::size_t i = begin; i < end; ++i) owner[nodes[i]] = firstRank;
+      return;
+    }
+    std::array<double, 3> low{1e300, 1e300, 1e300}, high{-1e300, -1e300, -1e300};
+    for (std::size_t i = begin; i < end; ++i) {
+      for (int d = 0; d < 3; ++d) {
+        const double x = job.nodes[3 * nodes[i] + std::size_t(d)];
+        low[std::size_t(d)] = std::min(low[std::size_t(d)], x);
+        high[std::size_t(d)] = std::max(high[std::size_t(d)], x);
+      }
+    }
+    int axis = 0;
+    for (int d = 1; d < 3; ++d) {
+      if (high[std::size_t(d)] - low[std::size_t(d)] > high[std::size_t(axis)] - low[std::size_t(axis)]) axis = d;
+    }
+    std::sort(nodes.begin() + std::ptrdiff_t(begin), nodes.begin() + std::ptrdiff_t(end), [&](std::size_t a, std::size_t b) {
+      const double xa = job.nodes[3 * a + std::size_t(axis)], xb = job.nodes[3 * b + std::size_t(axis)];
+      return xa < xb || (xa == xb && a < b); // ties by node number: one order on every rank
+    });
+    const int lowRanks = ranks / 2;
+    double total = 0;
+    for (std::size_t i = begin; i < end; ++i) total += work[nodes[i]];
+    const double target = total * double(lowRanks) / double(ranks);
+    double sum = 0;
+    std::size_t middle = begin;
+    while (middle < end - 1 && sum + work[nodes[middle]] <= target) sum += work[nodes[middle++]];
+    middle = std::max(middle, begin + 1);
+    split(begin, middle, firstRank, lowRanks);
+    split(middle, end, firstRank + lowRanks, ranks - lowRanks);
+  };
+  split(0, n, 0, size);
+  return owner;
+}
+
 Numbering partitionNodes(const FiniteElementJob& job, int rank, int size)
 {
   const PetscInt n = PetscInt(job.nodeCount());
   Numbering numbering;
   numbering.newOfOld.resize(std::size_t(n));
+  numbering.rangeStarts.assign(std::size_t(size) + 1, 0);
   if (size == 1) {
     std::iota(numbering.newOfOld.begin(), numbering.newOfOld.end(), 0);
     numbering.ownedCount = n;
@@ -81,67 +139,15 @@ Numbering partitionNodes(const FiniteElementJob& job, int rank, int size)
     numbering.partitioner = "none (one rank)";
     return numbering;
   }
-  // The node graph, rows split in contiguous blocks, for the partitioner.
-  const PetscInt first = n * rank / size, last = n * (rank + 1) / size;
-  std::vector<std::set<PetscInt>> neighbours(static_cast<std::size_t>(last - first));
-  std::vector<PetscInt> work(static_cast<std::size_t>(last - first), 0);
-  for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
-    for (int a = 0; a < 4; ++a) {
-      const PetscInt v = job.tetrahedra[4 * t + a];
-      if (v < first || v >= last) continue;
-      work[std::size_t(v - first)] += 1;
-      for (int b = 0; b < 4; ++b) {
-        if (a != b) neighbours[std::size_t(v - first)].insert(job.tetrahedra[4 * t + b]);
-      }
-    }
-  }
-  PetscInt *rowStarts, *columns, *weights;
-  PetscInt total = 0;
-  for (const auto& s : neighbours) total += PetscInt(s.size());
-  check(PetscMalloc1(last - first + 1, &rowStarts), "PetscMalloc1");
-  check(PetscMalloc1(std::max<PetscInt>(total, 1), &columns), "PetscMalloc1");
-  check(PetscMalloc1(std::max<PetscInt>(last - first, 1), &weights), "PetscMalloc1");
-  rowStarts[0] = 0;
-  for (PetscInt i = 0; i < last - first; ++i) {
-    rowStarts[i + 1] = rowStarts[i] + PetscInt(neighbours[std::size_t(i)].size());
-    std::copy(neighbours[std::size_t(i)].begin(), neighbours[std::size_t(i)].end(), columns + rowStarts[i]);
-    weights[i] = std::max<PetscInt>(1, work[std::size_t(i)]);
-  }
-  Mat adjacency;
-  check(MatCreateMPIAdj(PETSC_COMM_WORLD, last - first, n, rowStarts, columns, nullptr, &adjacency), "MatCreateMPIAdj");
-  MatPartitioning partitioning;
-  check(MatPartitioningCreate(PETSC_COMM_WORLD, &partitioning), "MatPartitioningCreate");
-  check(MatPartitioningSetAdjacency(partitioning, adjacency), "MatPartitioningSetAdjacency");
-  check(MatPartitioningSetVertexWeights(partitioning, weights), "MatPartitioningSetVertexWeights");
-#if defined(PETSC_HAVE_PTSCOTCH)
-  check(MatPartitioningSetType(partitioning, MATPARTITIONINGPTSCOTCH), "MatPartitioningSetType");
-#else
-  check(MatPartitioningSetType(partitioning, MATPARTITIONINGAVERAGE), "MatPartitioningSetType");
-#endif
-  check(MatPartitioningSetFromOptions(partitioning), "MatPartitioningSetFromOptions");
-  MatPartitioningType type;
-  check(MatPartitioningGetType(partitioning, &type), "MatPartitioningGetType");
-  numbering.partitioner = type;
-  IS ownerOfNode, newNumber;
-  check(MatPartitioningApply(partitioning, &ownerOfNode), "MatPartitioningApply");
-  check(ISPartitioningToNumbering(ownerOfNode, &newNumber), "ISPartitioningToNumbering");
-  std::vector<PetscInt> counts(static_cast<std::size_t>(size));
-  check(ISPartitioningCount(ownerOfNode, size, counts.data()), "ISPartitioningCount");
-  IS all;
-  check(ISAllGather(newNumber, &all), "ISAllGather");
-  const PetscInt* values;
-  check(ISGetIndices(all, &values), "ISGetIndices");
-  std::copy(values, values + n, numbering.newOfOld.begin());
-  check(ISRestoreIndices(all, &values), "ISRestoreIndices");
-  numbering.rangeStarts.assign(std::size_t(size) + 1, 0);
-  for (int r = 0; r < size; ++r) numbering.rangeStarts[std::size_t(r) + 1] = numbering.rangeStarts[std::size_t(r)] + counts[std::size_t(r)];
+  // Each rank's nodes numbered in a block, in their old order (as PETSc's ISPartitioningToNumbering).
+  const std::vector<int> owner = bisectedOwners(job, size);
+  for (int o : owner) numbering.rangeStarts[std::size_t(o) + 1] += 1;
+  for (int r = 0; r < size; ++r) numbering.rangeStarts[std::size_t(r) + 1] += numbering.rangeStarts[std::size_t(r)];
+  std::vector<PetscInt> next(numbering.rangeStarts.begin(), numbering.rangeStarts.end() - 1);
+  for (PetscInt old = 0; old < n; ++old) numbering.newOfOld[std::size_t(old)] = next[std::size_t(owner[std::size_t(old)])]++;
   numbering.firstOwned = numbering.rangeStarts[std::size_t(rank)];
-  numbering.ownedCount = counts[std::size_t(rank)];
-  ISDestroy(&all);
-  ISDestroy(&newNumber);
-  ISDestroy(&ownerOfNode);
-  MatPartitioningDestroy(&partitioning); // frees the weights
-  MatDestroy(&adjacency);                 // frees rowStarts and columns
+  numbering.ownedCount = numbering.rangeStarts[std::size_t(rank) + 1] - numbering.firstOwned;
+  numbering.partitioner = "recursive coordinate bisection";
   return numbering;
 }
 

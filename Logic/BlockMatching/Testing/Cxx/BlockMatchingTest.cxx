@@ -5,6 +5,8 @@
 // - a prediction 4 mm off is corrected within the search window;
 // - blocks whose match falls in a cavity of the scan are dropped, none is kept there;
 // - blocks holding an excluded tissue (a resected tumour) are not matched;
+// - a refine pass's new classification: the earlier matches whose block it no longer calls brain
+//   are dropped, the others kept as they were;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -14,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <random>
 
@@ -33,6 +36,42 @@ double texture(const PhysicalPoint& p)
 double distance(const PhysicalPoint& p, const std::array<double, 3>& c)
 {
   return std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+}
+
+/// A refine pass's new classification of the same scan (`notBrain`: where it calls the scan's
+/// point not brain, a second cavity {12, 14, -8} of 9 mm beside the first): the earlier matches
+/// held against it. Against the classification they were matched with they stay (but a few at the
+/// brain share's bound: the check reads the scan's grid at the sub-voxel match, the matching its
+/// own grid at the whole voxel); against the new one, those whose block lands in the second cavity
+/// go, the others stay.
+void checkMatchesHeldAgainstNewClassification(const BlockMatchingResult& result, const ScalarImage& preop, const LabelImage& intraopLabels,
+                                              const SpatialTransform& rigid, const BlockMatchingParameters& parameters,
+                                              const std::function<bool(const PhysicalPoint&)>& notBrain)
+{
+  const BlockMatchingResult same = matchesStillInBrain(result, preop, intraopLabels, rigid, parameters);
+  BS_CHECK_MSG(same.matches.size() >= result.matches.size() * 99 / 100, same.matches.size() << " of " << result.matches.size());
+  const LabelImage::Pointer reclassified =
+    testing::imageOn<LabelImage>(ImageGeometry::of(&intraopLabels), [&](const PhysicalPoint& y) { return LabelPixel(notBrain(y) ? 0 : 2); });
+  const std::array<double, 3> secondCavity{12, 14, -8};
+  const BlockMatchingResult held = matchesStillInBrain(result, preop, *reclassified, rigid, parameters);
+  auto target = [](const BlockMatch& m) {
+    PhysicalPoint x = m.centre;
+    for (int a = 0; a < 3; ++a) x[a] += m.displacement[std::size_t(a)];
+    return x;
+  };
+  std::size_t inSecondCavity = 0, droppedFarFromIt = 0;
+  for (const BlockMatch& m : held.matches) inSecondCavity += distance(target(m), secondCavity) < 6;
+  for (const BlockMatch& m : result.matches) {
+    const bool kept = std::any_of(held.matches.begin(), held.matches.end(), [&](const BlockMatch& k) { return k.centre == m.centre; });
+    if (!kept && distance(target(m), secondCavity) > 9 + 2 * parameters.blockHalfSizeMm) ++droppedFarFromIt;
+  }
+  const std::size_t dropped = result.matches.size() - held.matches.size();
+  std::cout << "held against a classification with a second cavity: " << held.matches.size() << " of " << result.matches.size()
+            << " kept, " << held.outsideBrain - result.outsideBrain << " now outside the brain\n";
+  BS_CHECK_MSG(dropped >= 5, dropped);
+  BS_CHECK_MSG(held.outsideBrain == result.outsideBrain + dropped, held.outsideBrain);
+  BS_CHECK_MSG(inSecondCavity == 0, inSecondCavity);
+  BS_CHECK_MSG(droppedFarFromIt <= result.matches.size() - same.matches.size(), droppedFarFromIt); // the bound's few
 }
 } // namespace
 
@@ -126,6 +165,11 @@ int BlockMatchingTest(int, char*[])
     std::cout << "without the shift: remap eta^2 " << still.remapCorrelationRatio << " (with it " << result.remapCorrelationRatio << ")\n";
     BS_CHECK_MSG(still.remapCorrelationRatio > 0.8, still.remapCorrelationRatio);
     BS_CHECK_MSG(result.remapCorrelationRatio < 0.5, result.remapCorrelationRatio);
+
+    checkMatchesHeldAgainstNewClassification(result, *preop, *intraopLabels, *rigid, parameters, [&](const PhysicalPoint& y) {
+      const PhysicalPoint inPreop = rigid->TransformPoint(y);
+      return distance(moved(y), {0, 0, 0}) > 38 || distance(inPreop, cavity) < 9 || distance(inPreop, {12, 14, -8}) < 9;
+    });
 
     parameters.searchRadiusMm = 0;
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "search radius");
