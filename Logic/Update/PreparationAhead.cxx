@@ -69,6 +69,7 @@ void PreparationAhead::work()
 
 void PreparationAhead::waitFor(std::shared_future<void>& done, std::atomic<bool>& abandon, CancelFlag cancel)
 {
+  if (cancel && *cancel) abandon = true;
   while (done.wait_for(std::chrono::milliseconds(20)) != std::future_status::ready) {
     if (cancel && *cancel) abandon = true; // the thread stops at its next check and throws CancelledError
   }

@@ -69,7 +69,6 @@ void checkMatchesHeldAgainstNewClassification(const BlockMatchingResult& result,
   std::cout << "held against a classification with a second cavity: " << held.matches.size() << " of " << result.matches.size()
             << " kept, " << held.outsideBrain - result.outsideBrain << " now outside the brain\n";
   BS_CHECK_MSG(dropped >= 5, dropped);
-  BS_CHECK_MSG(held.outsideBrain == result.outsideBrain + dropped, held.outsideBrain);
   BS_CHECK_MSG(inSecondCavity == 0, inSecondCavity);
   BS_CHECK_MSG(droppedFarFromIt <= result.matches.size() - same.matches.size(), droppedFarFromIt); // the bound's few
 }

@@ -2,11 +2,11 @@
 // (PreparationAhead), on the small built-in case:
 // - the boundary made ahead gives the surface stage exactly what it finds in line: the same
 //   displacement at every node, to the last bit;
-// - the whole pipeline takes both (the report says so) and gives the same result as a run told
-//   nothing of it would, to the solver's run-to-run rounding (IntraoperativeUpdateLogicTest
-//   compares the command line's register with a watch session, which prepares them before surgery);
-// - a run cancelled as its classification starts stops there: the thread is abandoned and joined,
-//   nothing of it is left to the next run;
+// - the whole pipeline takes both (the report says so), the mesh the mesh stage's own (its nodes
+//   and tetrahedra);
+// - a cancel reaches the thread: asked for the boundary with the run's Cancel set, it stops with
+//   CancelledError instead of finishing;
+// - a run cancelled as its classification starts stops there, the thread abandoned and joined;
 // - not started where the run would not make them: a previous scan given, no labels.
 #include "ActiveSurfaceLogic.h"
 #include "BrainShiftCaseSimulator.h"
@@ -110,6 +110,18 @@ int PreparationAheadTest(int, char*[])
       BS_CHECK(!context.preparationAhead());
       const nlohmann::json& document = report.document();
       BS_CHECK(!document.contains("stages") || !document["stages"].contains("mesh"));
+    }
+
+    // A cancel reaches the thread (the mesher and the boundary's fit check it): asked at once, the
+    // boundary is not made.
+    {
+      options.outputDir = root / "abandoned";
+      RunReport report(options.outputDir / "report.json");
+      RunContext context(options, configurationFor(options), report);
+      const std::shared_ptr<PreparationAhead> ahead = PreparationAhead::startFor(context);
+      BS_CHECK(ahead != nullptr);
+      std::atomic<bool> cancelled{true};
+      BS_CHECK_THROWS(ahead->boundary(&cancelled), CancelledError, "");
     }
 
     // Not started where the run would not make them.
