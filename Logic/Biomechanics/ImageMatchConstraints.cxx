@@ -1,6 +1,7 @@
 #include "ImageMatchConstraints.h"
 
 #include <vtkGenericCell.h>
+#include <vtkIdList.h>
 #include <vtkNew.h>
 #include <vtkStaticCellLocator.h>
 
@@ -14,6 +15,7 @@ struct MeshPointLocator::Impl {
   vtkSmartPointer<vtkUnstructuredGrid> mesh;
   vtkNew<vtkStaticCellLocator> locator;
   vtkNew<vtkGenericCell> cell;
+  vtkNew<vtkIdList> candidates;
 };
 
 MeshPointLocator::MeshPointLocator(vtkUnstructuredGrid* mesh)
@@ -28,9 +30,30 @@ MeshPointLocator::~MeshPointLocator() = default;
 
 std::optional<MeshPointLocator::Location> MeshPointLocator::locate(const PhysicalPoint& point) const
 {
+  constexpr double Tolerance = 1e-6;
   double x[3] = {point[0], point[1], point[2]}, pcoords[3], weights[8];
-  const vtkIdType id = impl_->locator->FindCell(x, 1e-6, impl_->cell, pcoords, weights);
+  vtkIdType id = impl_->locator->FindCell(x, Tolerance, impl_->cell, pcoords, weights);
   if (id < 0) return std::nullopt;
+  // A point on a face or an edge lies in several tetrahedra, and which one the static locator finds
+  // first depends on how its threads binned the cells: the same run gave matches 1e-16 mm apart and
+  // solutions 1e-11 mm apart. The lowest id among those that hold the point, the same every run.
+  const double bounds[6] = {x[0] - Tolerance, x[0] + Tolerance, x[1] - Tolerance, x[1] + Tolerance, x[2] - Tolerance, x[2] + Tolerance};
+  impl_->candidates->Reset();
+  impl_->locator->FindCellsWithinBounds(const_cast<double*>(bounds), impl_->candidates);
+  vtkIdType lowest = id;
+  for (vtkIdType c = 0; c < impl_->candidates->GetNumberOfIds(); ++c) {
+    const vtkIdType candidate = impl_->candidates->GetId(c);
+    if (candidate >= lowest) continue;
+    double closest[3], candidatePcoords[3], candidateWeights[8], distance2 = 0;
+    int subId = 0;
+    impl_->mesh->GetCell(candidate, impl_->cell);
+    if (impl_->cell->EvaluatePosition(x, closest, subId, candidatePcoords, distance2, candidateWeights) == 1 &&
+        distance2 <= Tolerance * Tolerance) {
+      lowest = candidate;
+      std::copy(candidateWeights, candidateWeights + 4, weights);
+    }
+  }
+  id = lowest;
   Location location;
   location.tetrahedron = std::int32_t(id);
   double sum = 0;

@@ -260,22 +260,16 @@ SerialScans)
   [ "$(json_value "$first/report.json" "['stages']['surface']['preop_boundary_from']")" = "made beside the rigid registration" ] ||
     fail "the first scan did not take the preoperative boundary made beside its rigid registration"
   float_check "$first/report.json" "['stages']['surface']['preop_boundary_made_ahead_seconds']" "> 0"
-  # The same scan registered again: the same classification and surface byte for byte, the
-  # worker's partition the same (recursive coordinate bisection; PT-Scotch's changed every run),
-  # and the solve the same to the last bits (a 1e-16 mm difference in the first solve is still
-  # seen here between runs, its source not found).
+  # Deterministic: the same scan registered again writes the same files, byte for byte (the
+  # worker's partition the same every run, and each match's tetrahedron the lowest that holds it;
+  # intraop_to_preop.h5 carries HDF5's own metadata, report.json the times).
   again=$work/serial/scan-1-again
   "$brainshift" register "${inputs[@]}" --output-dir "$again" --prototypes "$demo/classification_prototypes.json" >/dev/null ||
     fail "the first scan again exited $?"
-  for file in intraop_labels.nii.gz brain_surface.vtp; do
+  for file in intraop_labels.nii.gz brain_surface.vtp mesh.vtu block_matches.vtp displacement_intraop_to_preop.nrrd \
+    displacement_uncertainty_mm.nii.gz warped_preop_image.nii.gz warped_preop_labels.nii.gz; do
     cmp -s "$first/$file" "$again/$file" || fail "the same scan registered again wrote another $file"
   done
-  [ "$(json_value "$again/report.json" "['stages']['simulate']['tetrahedra_per_rank']")" = \
-    "$(json_value "$first/report.json" "['stages']['simulate']['tetrahedra_per_rank']")" ] || fail "the worker partitioned the same job otherwise"
-  change_first=$(json_value "$first/report.json" "['stages']['simulate']['block_matching']['mean_node_change_mm']")
-  change_again=$(json_value "$again/report.json" "['stages']['simulate']['block_matching']['mean_node_change_mm']")
-  python3 -c "import sys; sys.exit(0 if abs($change_first - $change_again) < 1e-6 else 1)" ||
-    fail "the same scan registered again solved otherwise: $change_first against $change_again mm"
   mkdir -p "$work/serial/mesh-alone"
   "$brainshift" mesh --preop-labels "$case_dir/preop_labels.nii.gz" --output-dir "$work/serial/mesh-alone" >/dev/null ||
     fail "mesh alone exited $?"
