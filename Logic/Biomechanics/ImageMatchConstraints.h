@@ -88,8 +88,9 @@ std::size_t keptSoftConstraints(const FiniteElementResult& result);
 using ConstrainedSolve = std::function<FiniteElementResult(const FiniteElementJob&)>;
 
 /// After Clatz et al. (2005): blocks matched from the surface-driven solution `surfaceOnly` of
-/// `job` on `mesh` (or the earlier matching's, still in the brain), then `job` solved again through `solve` with the matches as soft constraints,
-/// the worst rejected in rounds. std::invalid_argument when an input is missing.
+/// `job` on `mesh` (or the earlier matching's, still in the brain), then `job` solved again
+/// through `solve` with the matches as soft constraints, the worst rejected in rounds.
+/// std::invalid_argument when an input is missing.
 ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& surfaceOnly,
                                        const ImageDrivenSolveInputs& inputs, const Configuration& configuration,
                                        const ConstrainedSolve& solve);

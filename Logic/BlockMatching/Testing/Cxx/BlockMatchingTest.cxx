@@ -38,6 +38,17 @@ double distance(const PhysicalPoint& p, const std::array<double, 3>& c)
   return std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
 }
 
+/// Each match's distance from the true displacement `shift`, ascending.
+std::vector<double> sortedErrors(const BlockMatchingResult& result, const std::array<double, 3>& shift)
+{
+  std::vector<double> errors;
+  for (const BlockMatch& m : result.matches) {
+    errors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
+  }
+  std::sort(errors.begin(), errors.end());
+  return errors;
+}
+
 /// A refine pass's new classification of the same scan (`notBrain`: where it calls the scan's
 /// point not brain, a second cavity {12, 14, -8} of 9 mm beside the first): the earlier matches
 /// held against it. Against the classification they were matched with they stay (but a few at the
@@ -116,16 +127,14 @@ int BlockMatchingTest(int, char*[])
     parameters.excludedLabels = {4};
     const DisplacementPrediction none;
     const BlockMatchingResult result = matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters);
-    std::vector<double> errors;
+    const std::vector<double> errors = sortedErrors(result, shift);
     std::size_t nearTumour = 0, inCavity = 0;
     for (const BlockMatch& m : result.matches) {
-      errors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
       if (distance(m.centre, tumour) < 7 + parameters.blockHalfSizeMm) ++nearTumour;
       PhysicalPoint target = m.centre;
       for (int a = 0; a < 3; ++a) target[a] += m.displacement[std::size_t(a)];
       if (distance(target, cavity) < 6) ++inCavity; // a block may reach 30 % into it (minimumBrainShare)
     }
-    std::sort(errors.begin(), errors.end());
     const double median = errors.empty() ? 99 : errors[errors.size() / 2];
     const double p95 = errors.empty() ? 99 : errors[std::size_t(0.95 * double(errors.size() - 1))];
     std::cout << result.candidates << " candidates, " << result.selected << " selected, " << result.matches.size() << " matched ("
@@ -144,11 +153,7 @@ int BlockMatchingTest(int, char*[])
     // A prediction 4 mm off: found again within the search window.
     const DisplacementPrediction off = [&](const PhysicalPoint&) { return std::array<double, 3>{shift[0] + 2.5, shift[1] - 2.0, shift[2] + 2.4}; };
     const BlockMatchingResult corrected = matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, off, parameters);
-    std::vector<double> correctedErrors;
-    for (const BlockMatch& m : corrected.matches) {
-      correctedErrors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
-    }
-    std::sort(correctedErrors.begin(), correctedErrors.end());
+    const std::vector<double> correctedErrors = sortedErrors(corrected, shift);
     const double correctedMedian = correctedErrors.empty() ? 99 : correctedErrors[correctedErrors.size() / 2];
     std::cout << "prediction 4 mm off: " << corrected.matches.size() << " matched, error median " << correctedMedian << " mm\n";
     BS_CHECK_MSG(corrected.matches.size() >= result.matches.size() * 9 / 10, corrected.matches.size());
