@@ -8,6 +8,7 @@
 // with each --scan in turn, as the surgeon would; --screenshot then waits for the last scan.
 #include "Configuration.h"
 #include "HostMainWindow.h"
+#include "ProcessMemory.h"
 #include "ScriptedSession.h"
 #include "VolumeIO.h"
 
@@ -53,6 +54,7 @@ bool startSession(brainshift::HostMainWindow& window, const QString& preopImage,
 
 int main(int argc, char* argv[])
 {
+  brainshift::restartWithHugePageAllocations(argv); // first: it may run the program again
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication application(argc, argv);
   QApplication::setApplicationName("BrainShift");

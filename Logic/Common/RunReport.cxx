@@ -2,6 +2,7 @@
 
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
+#include "ProcessMemory.h"
 
 #include <algorithm>
 
@@ -65,7 +66,9 @@ void RunReport::addWarnings(const std::vector<std::string>& warnings)
 
 void RunReport::save() const
 {
-  writeTextFileAtomically(file_, document_.dump(2) + "\n");
+  nlohmann::json written = document_;
+  written["huge_page_allocations"] = hugePageAllocations(); // the last writer's process, as its times are
+  writeTextFileAtomically(file_, written.dump(2) + "\n");
 }
 
 } // namespace brainshift

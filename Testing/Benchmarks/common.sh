@@ -108,6 +108,8 @@ write_machine_description() {
     echo "cpu: $(lscpu | grep 'Model name' | sed 's/^Model name:[[:space:]]*//')"
     echo "memory:"
     free -h
+    echo "transparent huge pages: $(cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null || echo unknown);" \
+      "GLIBC_TUNABLES: ${GLIBC_TUNABLES:-unset (brainshift sets glibc.malloc.hugetlb=1 for itself)}"
     if [ $# -gt 0 ]; then "$@"; fi
     "$brainshift" --version 2>&1 | head -n 1
   } > "$out/machine.txt"

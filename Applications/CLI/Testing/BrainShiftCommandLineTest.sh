@@ -486,18 +486,28 @@ DemoRefusesForeignFolder)
 RigidStage)
   out=$work/rigid-stage
   rm -rf "$out"
-  "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
-    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out" >/dev/null || fail "rigid exited $?"
+  # Started without GLIBC_TUNABLES, brainshift runs itself again with its allocations on
+  # transparent huge pages where the kernel gives them (ProcessMemory.h); the run below opts out.
+  env -u GLIBC_TUNABLES "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out" \
+    >/dev/null || fail "rigid exited $?"
   [ -s "$out/rigid_intraop_to_preop.tfm" ] || fail "rigid wrote no rigid_intraop_to_preop.tfm"
+  huge=False
+  grep -qE '\[(always|madvise)\]' /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null && huge=True
+  [ "$(json_value "$out/report.json" "['huge_page_allocations']")" = "$huge" ] ||
+    fail "report.json huge_page_allocations is not $huge (transparent huge pages: $(cat /sys/kernel/mm/transparent_hugepage/enabled 2>&1))"
   for key in wall_seconds metric_value iterations iterations_per_level winning_start_degrees; do
     json_value "$out/report.json" "['stages']['rigid']['$key']" >/dev/null || fail "report.json lacks rigid.$key"
   done
   "$brainshift" evaluate --transform "$out/rigid_intraop_to_preop.tfm" --landmarks "$case_dir/landmarks.csv" \
     --json "$out/evaluation.json" >/dev/null || fail "evaluate exited $?"
   float_check "$out/evaluation.json" "['groups']['head']['max_mm']" "< 0.6"
-  # Same inputs, same transform.
-  "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" --preop-labels "$case_dir/preop_labels.nii.gz" \
-    --intraop-image "$case_dir/intraop_image.nii.gz" --output-dir "$out/again" >/dev/null || fail "rigid exited $?"
+  # Same inputs, same transform, on huge pages or not.
+  GLIBC_TUNABLES=glibc.malloc.hugetlb=0 "$brainshift" rigid --preop-image "$case_dir/preop_image.nii.gz" \
+    --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
+    --output-dir "$out/again" >/dev/null || fail "rigid exited $?"
+  [ "$(json_value "$out/again/report.json" "['huge_page_allocations']")" = "False" ] ||
+    fail "GLIBC_TUNABLES=glibc.malloc.hugetlb=0 did not keep 4 KiB pages"
   cmp -s "$out/rigid_intraop_to_preop.tfm" "$out/again/rigid_intraop_to_preop.tfm" || fail "rigid is not deterministic"
   # An intraoperative image without foreground is bad input; unrelated images are refused (exit 1).
   make_bad_inputs "$out/inputs"

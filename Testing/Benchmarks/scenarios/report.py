@@ -152,10 +152,12 @@ def parsed(value):
         return None
     if value in ("True", "False"):
         return value == "True"
-    try:
-        return float(value)
-    except ValueError:
-        return value
+    for number in (int, float):  # an integer stays one (refine_passes 2, not 2.0)
+        try:
+            return number(value)
+        except ValueError:
+            pass
+    return value
 
 
 def merged_rows(rows, scenarios, previous_csv):

@@ -22,7 +22,7 @@ out=${1:-$root/Testing/Benchmarks/results/session}
 repeats=${REPEATS:-3}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
-pick_python || python=python3
+ensure_matplotlib # report.py imports benchmark_common.py, which needs it
 require_brainshift
 prepare_output machine.txt session.csv summary.md runs/
 write_machine_description
