@@ -1,5 +1,7 @@
 #include "DisplacementUncertainty.h"
 
+#include "Configuration.h"
+
 #include <vtkIdList.h>
 #include <vtkNew.h>
 #include <vtkPoints.h>
@@ -69,6 +71,16 @@ std::vector<double> nodalDisplacementUncertainty(const std::vector<double>& node
     sigma[i] = std::sqrt(model.floorMm * model.floorMm + growth * growth + misfitSquared + moved * moved);
   }
   return sigma;
+}
+
+DisplacementUncertaintyModel displacementUncertaintyModelFrom(const Configuration& configuration)
+{
+  DisplacementUncertaintyModel model;
+  model.floorMm = configuration.uncertainty.floorMm;
+  model.growthPerMm = configuration.uncertainty.growthPerMm;
+  model.misfitReachMm = configuration.uncertainty.misfitReachMm;
+  model.displacementShare = configuration.uncertainty.displacementShare;
+  return model;
 }
 
 } // namespace brainshift

@@ -34,4 +34,8 @@ struct DisplacementEvidence {
 std::vector<double> nodalDisplacementUncertainty(const std::vector<double>& nodes, const std::vector<double>& displacements,
                                                  const DisplacementEvidence& evidence, const DisplacementUncertaintyModel& model = {});
 
+struct Configuration;
+/// The model of the configuration's "uncertainty" section (its defaults are those above).
+DisplacementUncertaintyModel displacementUncertaintyModelFrom(const Configuration& configuration);
+
 } // namespace brainshift

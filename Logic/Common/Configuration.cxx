@@ -11,6 +11,7 @@
 #include <initializer_list>
 #include <limits>
 #include <set>
+#include <tuple>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -220,6 +221,22 @@ void readBlockMatching(const json& c, const std::string& file, Configuration& co
   }
 }
 
+void readUncertainty(const json& c, const std::string& file, Configuration& configuration)
+{
+  if (!c.is_object()) throw InputError(file + ": \"uncertainty\" must be an object");
+  Configuration::Uncertainty& u = configuration.uncertainty;
+  const std::vector<std::pair<const char*, double*>> numbers{{"floor_mm", &u.floorMm},
+                                                             {"growth_per_mm", &u.growthPerMm},
+                                                             {"misfit_reach_mm", &u.misfitReachMm},
+                                                             {"displacement_share", &u.displacementShare}};
+  std::set<std::string> keys;
+  for (const auto& [key, target] : numbers) keys.insert(key);
+  requireKnownKeys(c, keys, file + ": uncertainty");
+  for (const auto& [key, target] : numbers) {
+    if (c.contains(key)) *target = number(c[key], file + ": uncertainty." + key);
+  }
+}
+
 /// Each section of the configuration file: its reader (the sections are read in this order).
 using SectionReader = void (*)(const json&, const std::string&, Configuration&);
 const std::vector<std::pair<const char*, SectionReader>>& sectionReaders()
@@ -227,7 +244,7 @@ const std::vector<std::pair<const char*, SectionReader>>& sectionReaders()
   static const std::vector<std::pair<const char*, SectionReader>> readers{
     {"materials", readMaterials}, {"mesh", readMesh},       {"solver", readSolver},
     {"classification", readClassification}, {"rigid", readRigid}, {"surface", readSurface},
-    {"block_matching", readBlockMatching}};
+    {"block_matching", readBlockMatching}, {"uncertainty", readUncertainty}};
   return readers;
 }
 } // namespace
@@ -243,7 +260,8 @@ Configuration Configuration::load(const fs::path& path)
   }
   const std::string file = path.string();
   if (!document.is_object()) throw InputError(file + ": the configuration must be a JSON object");
-  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface", "block_matching"}, file);
+  requireKnownKeys(document, {"materials", "mesh", "solver", "ranks", "rigid", "classification", "surface", "block_matching",
+                                "uncertainty"}, file);
   for (const auto& [section, read] : sectionReaders()) {
     if (document.contains(section)) read(document[section], file, configuration);
   }
@@ -403,6 +421,7 @@ void Configuration::validate(const std::string& source) const
   validateSurfaceSettings(*this, source);
   if (ranks < 1 || ranks > 1024) throw InputError(source + ": ranks " + std::to_string(ranks) + " is outside 1 to 1024");
   validateBlockMatching(source);
+  validateUncertainty(source);
 }
 
 void Configuration::validateBlockMatching(const std::string& source) const
@@ -427,6 +446,21 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("rejection_fraction", b.rejectionFraction, 0, 1);
   within("outlier_factor", b.outlierFactor, 0, 100);
   within("rejection_floor_mm", b.rejectionFloorMm, 0, 100);
+}
+
+void Configuration::validateUncertainty(const std::string& source) const
+{
+  for (const auto& [key, value, high] : {std::tuple<const char*, double, double>{"floor_mm", uncertainty.floorMm, 100},
+                                         {"growth_per_mm", uncertainty.growthPerMm, 10},
+                                         {"misfit_reach_mm", uncertainty.misfitReachMm, 100},
+                                         {"displacement_share", uncertainty.displacementShare, 10}}) {
+    if (!std::isfinite(value) || value < 0 || value > high) {
+      std::ostringstream message;
+      message << source << ": uncertainty." << key << " " << value << " is outside 0 to " << high;
+      throw InputError(message.str());
+    }
+  }
+  if (!(uncertainty.misfitReachMm > 0)) throw InputError(source + ": uncertainty.misfit_reach_mm must be above 0");
 }
 
 } // namespace brainshift

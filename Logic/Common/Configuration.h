@@ -93,6 +93,10 @@ struct Configuration {
     double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;
+  /// The confidence map's model (DisplacementUncertainty.h): "uncertainty" in the file.
+  struct Uncertainty {
+    double floorMm = 0.3, growthPerMm = 0.06, misfitReachMm = 8.0, displacementShare = 0.15;
+  } uncertainty;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,
   /// unknown keys, a Poisson ratio outside [0, 0.49) (0.49 and above lock linear tetrahedra), a
@@ -104,6 +108,7 @@ struct Configuration {
   /// Checks the values; `source` names where they came from in the error message.
   void validate(const std::string& source) const;
   void validateBlockMatching(const std::string& source) const;
+  void validateUncertainty(const std::string& source) const;
 };
 
 } // namespace brainshift

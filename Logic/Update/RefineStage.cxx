@@ -104,7 +104,8 @@ std::size_t addPassDisagreementToUncertainty(RunContext& context, const std::map
     mesh->GetPoint(i, &nodes[3 * std::size_t(i)]);
     displacement->GetTuple(i, &displacements[3 * std::size_t(i)]);
   }
-  const std::vector<double> sigma = nodalDisplacementUncertainty(nodes, displacements, evidence);
+  const std::vector<double> sigma =
+    nodalDisplacementUncertainty(nodes, displacements, evidence, displacementUncertaintyModelFrom(context.configuration()));
   for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) uncertainty->SetComponent(i, 0, sigma[std::size_t(i)]);
   context.products().writeModel(mesh, meshFile);
   return added;

@@ -373,12 +373,13 @@ namespace {
 /// The point array "DisplacementUncertainty" (mm) of the solved mesh: the confidence of the
 /// displacement from the evidence behind it (DisplacementUncertainty.h): the imposed surface nodes
 /// and, when block matching ran, the kept matches and every match's misfit.
-void attachUncertainty(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& result, DisplacementEvidence& evidence)
+void attachUncertainty(vtkUnstructuredGrid* mesh, const FiniteElementJob& job, const FiniteElementResult& result, DisplacementEvidence& evidence,
+                       const DisplacementUncertaintyModel& model)
 {
   for (std::int32_t node : job.fixedNodes) {
     evidence.points.push_back({job.nodes[3 * std::size_t(node)], job.nodes[3 * std::size_t(node) + 1], job.nodes[3 * std::size_t(node) + 2]});
   }
-  const std::vector<double> sigma = nodalDisplacementUncertainty(job.nodes, result.displacements, evidence);
+  const std::vector<double> sigma = nodalDisplacementUncertainty(job.nodes, result.displacements, evidence, model);
   vtkNew<vtkDoubleArray> array;
   array->SetName("DisplacementUncertainty");
   array->SetNumberOfTuples(vtkIdType(sigma.size()));
@@ -442,7 +443,7 @@ void runSimulateStage(RunContext& context)
     }
   }
   attachDisplacements(mesh, result);
-  attachUncertainty(mesh, job, result, evidence);
+  attachUncertainty(mesh, job, result, evidence, displacementUncertaintyModelFrom(context.configuration()));
   context.setSolveEvidence(evidence);
   context.products().writeModel(mesh, meshFile);
   context.report().setStage("simulate", {{"wall_seconds", clock.seconds()},

@@ -2,6 +2,7 @@
 // distance from it, raised by the misfit of the matches around a node and by the node's own
 // displacement, each by the model's weights.
 #include "BrainShiftTestingSupport.h"
+#include "Configuration.h"
 #include "DisplacementUncertainty.h"
 
 #include <cmath>
@@ -35,6 +36,14 @@ int DisplacementUncertaintyTest(int, char*[])
     sigma = nodalDisplacementUncertainty(nodes, moved, evidence, model);
     BS_CHECK_NEAR(sigma[0], std::hypot(0.3, 1.5), 1e-12);
     std::cout << "sigma " << sigma[0] << ' ' << sigma[1] << ' ' << sigma[2] << ' ' << sigma[3] << '\n';
+    // The configuration's "uncertainty" section: its defaults are the model's, and it sets each weight.
+    const DisplacementUncertaintyModel fromDefaults = displacementUncertaintyModelFrom(Configuration{});
+    BS_CHECK(fromDefaults.floorMm == model.floorMm && fromDefaults.growthPerMm == model.growthPerMm &&
+             fromDefaults.misfitReachMm == model.misfitReachMm && fromDefaults.displacementShare == model.displacementShare);
+    Configuration noGrowth;
+    noGrowth.uncertainty.growthPerMm = 0;
+    sigma = nodalDisplacementUncertainty(nodes, still, evidence, displacementUncertaintyModelFrom(noGrowth));
+    BS_CHECK_NEAR(sigma[3], 0.3, 1e-12); // 40 mm from the evidence, beyond the match's reach: the floor alone
     evidence.misfitsMm.clear();
     BS_CHECK_THROWS(nodalDisplacementUncertainty(nodes, still, evidence, model), std::invalid_argument, "one misfit per match");
     BS_CHECK_THROWS(nodalDisplacementUncertainty(nodes, std::vector<double>(3, 0.0), DisplacementEvidence{}, model),
