@@ -19,9 +19,11 @@ namespace brainshift {
 
 struct DisplacementUncertaintyModel {
   double floorMm = 0.3;            ///< the error where the evidence is exact
-  double growthPerMm = 0.06;       ///< added per mm of distance from the nearest evidence
+  /// Added per mm of distance from the nearest evidence. Off: it ranked the deep brain, which hardly
+  /// moves, as uncertain (README, "The confidence map": 0.06 before).
+  double growthPerMm = 0.0;
   double misfitReachMm = 8.0;      ///< matches within this distance count in a node's misfit (Gaussian, sigma reach / 2)
-  double displacementShare = 0.15; ///< of the node's own displacement
+  double displacementShare = 0.25; ///< of the node's own displacement (0.15 before)
 };
 
 struct DisplacementEvidence {

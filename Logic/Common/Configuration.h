@@ -93,9 +93,11 @@ struct Configuration {
     double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;
-  /// The confidence map's model (DisplacementUncertainty.h): "uncertainty" in the file.
+  /// The confidence map's model (DisplacementUncertainty.h): "uncertainty" in the file. No growth
+  /// with the distance from the evidence and a quarter of the displacement: chosen on the 24
+  /// scenarios (README, "The confidence map").
   struct Uncertainty {
-    double floorMm = 0.3, growthPerMm = 0.06, misfitReachMm = 8.0, displacementShare = 0.15;
+    double floorMm = 0.3, growthPerMm = 0.0, misfitReachMm = 8.0, displacementShare = 0.25;
   } uncertainty;
 
   /// Reads `path` over the defaults. InputError naming the file and the key for malformed JSON,

@@ -12,7 +12,9 @@ int DisplacementUncertaintyTest(int, char*[])
 {
   return brainshift::testing::runTest("DisplacementUncertaintyTest", [] {
     using namespace brainshift;
-    const DisplacementUncertaintyModel model; // floor 0.3, 0.06 per mm, reach 8 mm, share 0.15
+    DisplacementUncertaintyModel model; // floor 0.3, reach 8 mm; growth and share set here
+    model.growthPerMm = 0.06;
+    model.displacementShare = 0.15;
     // Nodes along x at 0, 10, 20, 40 mm; evidence at x = 0.
     const std::vector<double> nodes{0, 0, 0, 10, 0, 0, 20, 0, 0, 40, 0, 0};
     std::vector<double> still(nodes.size(), 0.0);
@@ -37,13 +39,17 @@ int DisplacementUncertaintyTest(int, char*[])
     BS_CHECK_NEAR(sigma[0], std::hypot(0.3, 1.5), 1e-12);
     std::cout << "sigma " << sigma[0] << ' ' << sigma[1] << ' ' << sigma[2] << ' ' << sigma[3] << '\n';
     // The configuration's "uncertainty" section: its defaults are the model's, and it sets each weight.
-    const DisplacementUncertaintyModel fromDefaults = displacementUncertaintyModelFrom(Configuration{});
-    BS_CHECK(fromDefaults.floorMm == model.floorMm && fromDefaults.growthPerMm == model.growthPerMm &&
-             fromDefaults.misfitReachMm == model.misfitReachMm && fromDefaults.displacementShare == model.displacementShare);
-    Configuration noGrowth;
-    noGrowth.uncertainty.growthPerMm = 0;
-    sigma = nodalDisplacementUncertainty(nodes, still, evidence, displacementUncertaintyModelFrom(noGrowth));
+    const DisplacementUncertaintyModel fromDefaults = displacementUncertaintyModelFrom(Configuration{}), builtIn;
+    BS_CHECK(fromDefaults.floorMm == builtIn.floorMm && fromDefaults.growthPerMm == builtIn.growthPerMm &&
+             fromDefaults.misfitReachMm == builtIn.misfitReachMm && fromDefaults.displacementShare == builtIn.displacementShare);
+    // The defaults: no growth with the distance, a quarter of the displacement.
+    sigma = nodalDisplacementUncertainty(nodes, moved, evidence, fromDefaults);
+    BS_CHECK_NEAR(sigma[0], std::hypot(0.3, 2.5), 1e-12);
     BS_CHECK_NEAR(sigma[3], 0.3, 1e-12); // 40 mm from the evidence, beyond the match's reach: the floor alone
+    Configuration growing;
+    growing.uncertainty.growthPerMm = 0.06;
+    sigma = nodalDisplacementUncertainty(nodes, still, evidence, displacementUncertaintyModelFrom(growing));
+    BS_CHECK_NEAR(sigma[3], std::hypot(0.3, 2.4), 1e-12);
     evidence.misfitsMm.clear();
     BS_CHECK_THROWS(nodalDisplacementUncertainty(nodes, still, evidence, model), std::invalid_argument, "one misfit per match");
     BS_CHECK_THROWS(nodalDisplacementUncertainty(nodes, std::vector<double>(3, 0.0), DisplacementEvidence{}, model),
