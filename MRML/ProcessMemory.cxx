@@ -34,7 +34,9 @@ bool hugePageAllocations()
 #if defined(__linux__) && defined(__GLIBC__)
   const char* tunables = std::getenv("GLIBC_TUNABLES");
   const std::string value = hugeTlbTunable(tunables ? tunables : "");
-  return (value == "1" || value == "2") && transparentHugePagesAvailable();
+  // 1: transparent huge pages (madvise), what restartWithHugePageAllocations sets. Not 2, whose
+  // hugetlbfs pages glibc falls back from silently when none are reserved.
+  return value == "1" && transparentHugePagesAvailable();
 #else
   return false;
 #endif

@@ -20,8 +20,8 @@ namespace brainshift {
 /// on as it is: the setting is a matter of speed, never of results).
 void restartWithHugePageAllocations(char** argv);
 
-/// Whether this process's allocations go on transparent huge pages (GLIBC_TUNABLES asks for them
-/// and the kernel gives them); report.json records it beside the times.
+/// Whether this process's allocations go on transparent huge pages (GLIBC_TUNABLES says
+/// glibc.malloc.hugetlb=1 and the kernel's policy allows them); report.json records it beside the times.
 bool hugePageAllocations();
 
 } // namespace brainshift

@@ -1,16 +1,17 @@
 #pragma once
 // An estimate of the error of the solved displacement, per mesh node (mm): the confidence map of
-// the update. The displacement is known where evidence pins it (the imposed surface nodes, the
-// kept image matches) to that evidence's own accuracy, and less well the farther a node lies from
-// any evidence; where the evidence disagrees with the solution (the misfit of the matches around a
-// node, kept or rejected) it is known worse by that disagreement.
+// the update. A model is wrong by a share of how far it moves the tissue; where the evidence
+// disagrees with the solution (the misfit of the matches around a node, kept or rejected) it is
+// known worse by that disagreement; and it may be known less well the farther a node lies from any
+// evidence (the imposed surface nodes, the kept matches), a term off by default:
 //
 //   sigma(n)^2 = floor^2 + (growth * distance to the nearest evidence)^2
 //                + (local root mean square misfit of the matches within reach)^2
-//                + (share * |u(n)|)^2   (a model is wrong by a share of how far it moves the tissue)
+//                + (share * |u(n)|)^2
 //
-// The weights are a model, not a measurement: the estimate is validated against the true error on
-// the built-in scenarios (Logic/Evaluation/UncertaintyEvaluation, demo's evaluation.json).
+// The weights are a model, not a measurement: chosen on, and validated against the true error of,
+// the built-in scenarios (Logic/Evaluation/UncertaintyEvaluation, demo's evaluation.json; README,
+// "The confidence map"). The distance term ranked the deep brain, which hardly moves, as uncertain.
 #include <array>
 #include <cstdint>
 #include <vector>
