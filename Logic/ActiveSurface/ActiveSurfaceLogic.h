@@ -87,6 +87,11 @@ struct ActiveSurfaceParameters {
   /// Put each matched node on the boundary at the end (snapOntoBoundary in the .cxx) rather than
   /// where the membrane's equilibrium leaves it, short of the boundary.
   bool snapToBoundary = false;
+  /// Add the membrane's residual, filtered by the membrane once more (twicing; correctMembraneResidual
+  /// in the .cxx): the smooth part of what the equilibrium leaves short of the target, the bottom
+  /// of a deep sink, is taken up; the boundary's roughness stays filtered. On: chosen on the
+  /// scenarios' finite element truths (README, "Active surface").
+  bool residualCorrection = true;
   /// A partial field of view (a slab around the craniotomy): the surface nodes it does not cover
   /// are left free for the elastic model (false), or held at rest where the skull holds them (true:
   /// imposed, zero displacement).
@@ -127,6 +132,8 @@ struct ActiveSurfaceResult {
   std::array<double, 3> sinkingDirection{}; ///< the common direction estimated (model frame; 0: none)
   std::size_t directionalNodes = 0;  ///< nodes matched along it
   std::size_t unsnappedNodes = 0;    ///< nodes kept at the membrane's position (snapping would turn a triangle over)
+  /// The residual correction (residualCorrection): its mean length over the matched nodes and its largest (mm).
+  double residualCorrectionMeanMm = 0, residualCorrectionMaxMm = 0;
   /// The fit to the preoperative boundary (mesh and preoperative labels only: could be prepared
   /// before surgery), the intraoperative target's distance map, the intraoperative iterations.
   double preopBoundarySeconds = 0, targetSeconds = 0, iterationSeconds = 0;

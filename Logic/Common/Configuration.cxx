@@ -190,9 +190,10 @@ void readSurface(const json& c, const std::string& file, Configuration& configur
 {
   if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
   requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
-                       "snap_to_boundary", "hold_outside_field_of_view"}, file + ": surface");
+                       "snap_to_boundary", "residual_correction", "hold_outside_field_of_view"}, file + ": surface");
   readFlags(c, {{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
                 {"snap_to_boundary", &configuration.surfaceSnapToBoundary},
+                {"residual_correction", &configuration.surfaceResidualCorrection},
                 {"hold_outside_field_of_view", &configuration.surfaceHoldOutsideFieldOfView}},
             file + ": surface");
   if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");

@@ -76,9 +76,11 @@ struct Configuration {
   double surfaceImageWeight = 0.0;
   unsigned surfaceMaximumIterations = 200;
   /// Nodes that moved matched along the brain's common sinking direction, not to the closest point;
-  /// matched nodes put on the boundary at the end (ActiveSurfaceLogic.h).
+  /// matched nodes put on the boundary at the end; the membrane's residual, filtered once more,
+  /// added (ActiveSurfaceLogic.h).
   bool surfaceMatchAlongSinkingDirection = true;
   bool surfaceSnapToBoundary = false;
+  bool surfaceResidualCorrection = true;
   /// Surface nodes outside the intraoperative field of view: held at rest (true) or left free.
   bool surfaceHoldOutsideFieldOfView = true;
   /// Block matching inside the brain (Logic/BlockMatching) and its matches as soft constraints of

@@ -1,6 +1,6 @@
 // The active surface: a sphere that shrinks under a rigid motion (the surface lands on the target
 // sphere, moves radially, honours the rigid transform), the small built-in case against its truth,
-// a resected tumour left free, determinism, and bad input named.
+// a resected tumour left free, a deep sink's bottom reached, determinism, and bad input named.
 #include "ActiveSurfaceLogic.h"
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
@@ -20,6 +20,8 @@
 #include <atomic>
 #include <cmath>
 #include <iostream>
+#include <utility>
+#include <vector>
 
 namespace {
 using namespace brainshift;
@@ -70,12 +72,19 @@ ImageGeometry intraopGrid()
                                    brainshift::testing::rotationAbout(0.2, 1.0, 0.3, 12.0));
 }
 
+/// The sphere's mesh at 3 mm (or `resolutionMm`) of the labels `meshed`.
+MeshingParameters sphereMeshing(std::vector<int> meshed = {2}, double resolutionMm = 3.0)
+{
+  MeshingParameters meshing;
+  meshing.resolutionMm = resolutionMm;
+  meshing.labels = std::move(meshed);
+  return meshing;
+}
+
 void sphereShrinks()
 {
   const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
-  MeshingParameters meshing;
-  meshing.resolutionMm = 3.0;
-  meshing.labels = {2};
+  const MeshingParameters meshing = sphereMeshing();
   const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
   const auto rigid = brainshift::testing::makeRigidTransform(); // intraop -> preop
   const auto intraop = sphereLabels(intraopGrid(), 32.0, rigid.GetPointer(), false, false);
@@ -174,9 +183,7 @@ void imageGuardsAgainstAWrongSegmentation()
   // The intraoperative segmentation is eroded by 4 mm over a cap of the sphere (a classification
   // that took brain for fluid there); the image still shows the whole sphere.
   const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
-  MeshingParameters meshing;
-  meshing.resolutionMm = 3.0;
-  meshing.labels = {2};
+  const MeshingParameters meshing = sphereMeshing();
   const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
   auto identity = itk::Euler3DTransform<double>::New();
   const auto truth = sphereLabels(intraopGrid(), 32.0, nullptr, false, false);
@@ -219,9 +226,7 @@ void imageGuardsAgainstAWrongSegmentation()
 void resectedTumourIsFree()
 {
   const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, true, false);
-  MeshingParameters meshing;
-  meshing.resolutionMm = 3.0;
-  meshing.labels = {2, 4};
+  const MeshingParameters meshing = sphereMeshing({2, 4});
   const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
   auto identity = itk::Euler3DTransform<double>::New();
   const auto intraop = sphereLabels(preopGrid(), 35.0, nullptr, true, true); // the cavity opens at the top
@@ -247,6 +252,58 @@ void resectedTumourIsFree()
   BS_CHECK(intact.imposedNodes == intact.surfaceNodes);
 }
 
+/// A deep, narrow sink (12 mm at the top of a 35 mm sphere, a Gaussian of 12 mm): the membrane's
+/// equilibrium leaves the bottom of the bowl short of the target (the filter's loss grows with the
+/// motion's curvature); the residual correction (twicing) takes most of it up, and costs nothing
+/// where the target is smooth.
+void deepSinkReachesItsBottom()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  const MeshingParameters meshing = sphereMeshing();
+  const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
+  auto identity = itk::Euler3DTransform<double>::New();
+  const double depth = 12.0, sigma = 12.0;
+  auto sunkenRadius = [&](double offAxis) { return 35.0 - depth * std::exp(-offAxis * offAxis / (2 * sigma * sigma)); };
+  auto sunken = brainshift::testing::makeImage<LabelImage>(preopGrid());
+  itk::ImageRegionIteratorWithIndex<LabelImage> it(sunken, sunken->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint x;
+    sunken->TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    const double offAxis = std::hypot(x[0] - sphereCentre[0], x[1] - sphereCentre[1]);
+    const double radius = sunkenRadius(offAxis); // the upper half's surface: the sphere pushed down along the axis
+    const double top = sphereCentre[2] + std::sqrt(std::max(0.0, radius * radius - offAxis * offAxis));
+    it.Set(x.EuclideanDistanceTo(sphereCentre) <= 35.0 && (x[2] <= sphereCentre[2] || x[2] <= top) ? 2 : 0);
+  }
+  // Over the bowl's bottom (within 4 mm of the axis): how far above the sunken surface the nodes end (mm).
+  auto shortOfBottom = [&](const ActiveSurfaceResult& r) {
+    double sum = 0;
+    int count = 0;
+    for (vtkIdType i = 0; i < r.surface->GetNumberOfPoints(); ++i) {
+      double x[3];
+      r.surface->GetPoint(i, x);
+      const double offAxis = std::hypot(x[0] - sphereCentre[0], x[1] - sphereCentre[1]);
+      if (offAxis > 4.0 || x[2] < sphereCentre[2]) continue;
+      const double radius = sunkenRadius(offAxis);
+      sum += x[2] - (sphereCentre[2] + std::sqrt(radius * radius - offAxis * offAxis));
+      ++count;
+    }
+    BS_CHECK(count >= 3);
+    return sum / std::max(count, 1);
+  };
+  ActiveSurfaceParameters membraneAlone;
+  membraneAlone.residualCorrection = false;
+  const ActiveSurfaceResult plain = deformBrainSurface(mesh.mesh, preop.GetPointer(), *sunken, nullptr, *identity, membraneAlone);
+  const ActiveSurfaceResult corrected = deformBrainSurface(mesh.mesh, preop.GetPointer(), *sunken, nullptr, *identity, ActiveSurfaceParameters{});
+  std::cout << "deep sink: the bowl's bottom " << shortOfBottom(plain) << " mm short with the membrane alone, " << shortOfBottom(corrected)
+            << " mm with the residual corrected (correction " << corrected.residualCorrectionMeanMm << " mm mean, "
+            << corrected.residualCorrectionMaxMm << " max); residual " << plain.meanResidualMm << " -> " << corrected.meanResidualMm << " mm\n";
+  BS_CHECK(plain.residualCorrectionMaxMm == 0);
+  BS_CHECK_MSG(shortOfBottom(plain) > 0.5, shortOfBottom(plain));
+  BS_CHECK_MSG(std::abs(shortOfBottom(corrected)) < 0.5 * shortOfBottom(plain), shortOfBottom(corrected));
+  BS_CHECK_MSG(corrected.meanResidualMm < plain.meanResidualMm, corrected.meanResidualMm);
+  BS_CHECK(corrected.flippedTriangles == 0 && corrected.residualCorrectionMaxMm > 0.3);
+}
+
 /// An axial slab through the sphere's middle (`slices` of 2.5 mm) as the intraoperative grid.
 ImageGeometry slabGrid(std::size_t slices)
 {
@@ -260,9 +317,7 @@ ImageGeometry slabGrid(std::size_t slices)
 void slabFieldOfView()
 {
   const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
-  MeshingParameters meshing;
-  meshing.resolutionMm = 3.0;
-  meshing.labels = {2};
+  const MeshingParameters meshing = sphereMeshing();
   const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
   auto identity = itk::Euler3DTransform<double>::New();
   const auto slab = sphereLabels(slabGrid(12), 32.0, nullptr, false, false);
@@ -344,9 +399,7 @@ void smallCaseAgainstTruth()
 void badInput()
 {
   const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
-  MeshingParameters meshing;
-  meshing.resolutionMm = 4.0;
-  meshing.labels = {2};
+  const MeshingParameters meshing = sphereMeshing({2}, 4.0);
   const LabelMapMesh mesh = meshLabelMap(*preop, meshing);
   auto identity = itk::Euler3DTransform<double>::New();
   const ActiveSurfaceParameters parameters;
@@ -425,6 +478,7 @@ int ActiveSurfaceTest(int, char*[])
     sphereShrinks();
     imageGuardsAgainstAWrongSegmentation();
     resectedTumourIsFree();
+    deepSinkReachesItsBottom();
     slabFieldOfView();
     badInput();
     smallCaseAgainstTruth();
