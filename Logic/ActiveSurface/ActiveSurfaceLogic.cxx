@@ -32,7 +32,6 @@
 #include <optional>
 #include <set>
 #include <sstream>
-#include <tuple>
 
 namespace brainshift {
 
@@ -1250,10 +1249,18 @@ void requireUnfolded(const Eigen::MatrixXd& preopBoundary, const Eigen::MatrixXd
 /// while what F damps strongly (the boundary's voxel-scale roughness) stays damped.
 /// The residual is each matched node's final pull (free nodes: none); `unitStep` is the membrane
 /// with tau = 1 (F itself). Refreshes the matched nodes' residuals to the segmentation's boundary
-/// (not where the image's edge placed the node). Returns the correction's mean and largest length.
-std::pair<double, double> correctMembraneResidual(FitOutcome& fit, const MembraneStep& unitStep, const IntraopTarget& target,
-                                                  const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p)
+/// (not where the image's edge placed the node). Sets the correction's mean and largest length.
+void correctMembraneResidual(FitOutcome& fit, const Eigen::SparseMatrix<double>& laplacian, const MembraneStep& membrane,
+                             const IntraopTarget& target, const std::vector<unsigned char>& freeReason,
+                             const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
 {
+  std::optional<MembraneStep> ownUnitStep; // F needs tau = 1: the iterations' own step unless told otherwise
+  if (p.timeStep != 1.0) {
+    ActiveSurfaceParameters unit = p;
+    unit.timeStep = 1.0;
+    ownUnitStep.emplace(laplacian, unit);
+  }
+  const MembraneStep& unitStep = ownUnitStep ? *ownUnitStep : membrane;
   const Eigen::Index n = fit.positions.rows();
   Eigen::MatrixXd residual = Eigen::MatrixXd::Zero(n, 3);
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -1276,7 +1283,8 @@ std::pair<double, double> correctMembraneResidual(FitOutcome& fit, const Membran
   for (std::size_t i = 0; i < refreshed.size(); ++i) {
     if (freeReason[i] == 0 && !fit.imageUsed[i]) fit.residuals[i] = refreshed[i];
   }
-  return {corrected ? sum / double(corrected) : 0.0, largest};
+  result.residualCorrectionMeanMm = corrected ? sum / double(corrected) : 0.0;
+  result.residualCorrectionMaxMm = largest;
 }
 
 /// Each node's displacement from its preoperative boundary point: snapped onto the target boundary
@@ -1481,16 +1489,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   const std::vector<double> initialResiduals = residualsAt(initialPositions, *target.field, target.toIndex);
   IntraopFit fitted = fitIntraopBoundary(membrane, preopBoundary, target, edges.get(), freeReason, p, result);
   warnIfNotConverged(preopFit, preopLabels != nullptr, p, result);
-  if (p.residualCorrection) {
-    std::optional<MembraneStep> ownUnitStep;
-    if (p.timeStep != 1.0) {
-      ActiveSurfaceParameters unit = p;
-      unit.timeStep = 1.0;
-      ownUnitStep.emplace(laplacian, unit);
-    }
-    std::tie(result.residualCorrectionMeanMm, result.residualCorrectionMaxMm) =
-      correctMembraneResidual(fitted.fit, ownUnitStep ? *ownUnitStep : membrane, target, freeReason, p);
-  }
+  if (p.residualCorrection) correctMembraneResidual(fitted.fit, laplacian, membrane, target, freeReason, p, result);
   result.iterationSeconds = secondsSince(iterationStart);
 
   // -- Nodes left free, the figures, and the deformed surface.
