@@ -7,7 +7,7 @@ build=${BRAINSHIFT_BUILD_DIR:-$root/build}
 bash "$root/scripts/build.sh"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 # The test drivers' allocations on transparent huge pages too, as brainshift and brainshift-host
-# arrange for themselves (MRML/ProcessMemory.h): first touches of large images cost much less.
+# arrange for themselves (Core/ProcessMemory.h): first touches of large images cost much less.
 if [ -z "${GLIBC_TUNABLES:-}" ]; then export GLIBC_TUNABLES=glibc.malloc.hugetlb=1; fi
 if command -v xvfb-run >/dev/null 2>&1; then
   xvfb-run -a ctest --test-dir "$build" -j"$(nproc)" --output-on-failure "$@"

@@ -223,150 +223,29 @@ public:
     : job_(job), rank_(rank), size_(size)
   {
     result_.ranks = size;
-    const PetscInt n = PetscInt(job.nodeCount());
-    n_ = n;
-    result_.equations = 3 * std::int64_t(n);
+    n_ = PetscInt(job.nodeCount());
+    result_.equations = 3 * std::int64_t(n_);
     double clock = MPI_Wtime();
 
-    // -- Partition and renumber.
     progress(rank, "partition", 0.0);
     numbering_ = partitionNodes(job, rank, size);
     result_.partitioner = numbering_.partitioner;
     first_ = numbering_.firstOwned;
     owned_ = numbering_.ownedCount;
 
-    // -- Preallocation (block rows of 3) and the tetrahedra this rank assembles.
-    std::vector<std::vector<PetscInt>> blockNeighbours(static_cast<std::size_t>(owned_));
-    std::vector<std::size_t> myTetrahedra;
-    for (std::size_t t = 0; t < job.tetrahedronCount(); ++t) {
-      PetscInt v[4];
-      for (int k = 0; k < 4; ++k) v[k] = numbering_.newOfOld[std::size_t(job.tetrahedra[4 * t + k])];
-      if (mine(v[0])) myTetrahedra.push_back(t);
-      for (int a = 0; a < 4; ++a) {
-        if (!mine(v[a])) continue;
-        for (int b = 0; b < 4; ++b) blockNeighbours[std::size_t(v[a] - first_)].push_back(v[b]);
-      }
-    }
-    std::vector<PetscInt> diagonalBlocks(static_cast<std::size_t>(owned_)), offDiagonalBlocks(static_cast<std::size_t>(owned_));
-    for (PetscInt i = 0; i < owned_; ++i) {
-      auto& list = blockNeighbours[std::size_t(i)];
-      std::sort(list.begin(), list.end());
-      list.erase(std::unique(list.begin(), list.end()), list.end());
-      for (PetscInt c : list) (mine(c) ? diagonalBlocks : offDiagonalBlocks)[std::size_t(i)] += 1;
-      if (list.empty()) diagonalBlocks[std::size_t(i)] = 1; // a node in no tetrahedron (kept solvable)
-      std::vector<PetscInt>().swap(list);
-    }
-    check(MatCreate(PETSC_COMM_WORLD, &A_), "MatCreate");
-    check(MatSetSizes(A_, 3 * owned_, 3 * owned_, 3 * n, 3 * n), "MatSetSizes");
-    check(MatSetBlockSize(A_, 3), "MatSetBlockSize");
-    check(MatSetType(A_, MATAIJ), "MatSetType");
-    check(MatSetOptionsPrefix(A_, "elasticity_"), "MatSetOptionsPrefix");
-    check(MatSetFromOptions(A_), "MatSetFromOptions");
-    check(MatXAIJSetPreallocation(A_, 3, diagonalBlocks.data(), offDiagonalBlocks.data(), nullptr, nullptr), "MatXAIJSetPreallocation");
-    check(MatSetOption(A_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE), "MatSetOption");
-
-    // -- Assembly.
+    const AssemblyShare share = assemblyShare();
+    createPreallocatedMatrix(share);
     progress(rank, "assembly", 0.0);
-    for (std::size_t t : myTetrahedra) {
-      double p[4][3];
-      PetscInt blocks[4];
-      for (int k = 0; k < 4; ++k) {
-        const std::size_t old = std::size_t(job.tetrahedra[4 * t + k]);
-        for (int d = 0; d < 3; ++d) p[k][d] = job.nodes[3 * old + d];
-        blocks[k] = numbering_.newOfOld[old];
-      }
-      double K[144];
-      tetrahedronStiffness(p, job.materials[std::size_t(job.materialOfTetrahedron[t])], K);
-      check(MatSetValuesBlocked(A_, 4, blocks, 4, blocks, K, ADD_VALUES), "MatSetValuesBlocked");
-    }
-    for (PetscInt i = 0; i < owned_; ++i) {
-      if (offDiagonalBlocks[std::size_t(i)] == 0 && diagonalBlocks[std::size_t(i)] == 1) {
-        const PetscInt row = first_ + i;
-        const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-        check(MatSetValuesBlocked(A_, 1, &row, 1, &row, identity, ADD_VALUES), "MatSetValuesBlocked");
-      }
-    }
-    check(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
-    check(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
-    // Symmetric positive definite, and stays so through every elimination (1 on the diagonal of a
-    // fixed dof) and soft constraint (H^T W H added): said once for good. (Positive definite as long
-    // as the fixed nodes pin every piece of the mesh, as the surface's imposed nodes do; a piece
-    // left free is singular either way, and its solve fails its true-residual check.) A factorisation then
-    // takes it without pivoting (MUMPS's SYM=1, not the symmetric indefinite SYM=2, whose pivots
-    // follow the rounding of the ranks' sums and once outgrew MUMPS's memory estimate: KSP reason
-    // -11 in a fresh-clone run of FiniteElementSessionTest).
-    check(MatSetOption(A_, MAT_SPD, PETSC_TRUE), "MatSetOption");
-    check(MatSetOption(A_, MAT_SPD_ETERNAL, PETSC_TRUE), "MatSetOption");
-    {
-      std::int64_t mineCount = std::int64_t(myTetrahedra.size());
-      result_.tetrahedraPerRank.resize(std::size_t(size));
-      MPI_Allgather(&mineCount, 1, MPI_INT64_T, result_.tetrahedraPerRank.data(), 1, MPI_INT64_T, PETSC_COMM_WORLD);
-    }
+    assemble(share);
     // The assembled matrix before elimination gives the right-hand side of each new set of values.
     check(MatDuplicate(A_, MAT_COPY_VALUES, &assembled_), "MatDuplicate");
-
-    // -- Eliminate the fixed dofs, keeping A symmetric.
-    eliminate(job.fixedNodes);
-
-    // Rigid body modes for the multigrid (coordinates in the new numbering).
-    Vec coordinates;
-    check(VecCreateMPI(PETSC_COMM_WORLD, 3 * owned_, 3 * n, &coordinates), "VecCreateMPI");
-    check(VecSetBlockSize(coordinates, 3), "VecSetBlockSize");
-    {
-      PetscScalar* c;
-      check(VecGetArray(coordinates, &c), "VecGetArray");
-      for (PetscInt old = 0; old < n; ++old) {
-        const PetscInt node = numbering_.newOfOld[std::size_t(old)];
-        if (!mine(node)) continue;
-        for (int d = 0; d < 3; ++d) c[3 * (node - first_) + d] = job.nodes[3 * std::size_t(old) + std::size_t(d)];
-      }
-      check(VecRestoreArray(coordinates, &c), "VecRestoreArray");
-    }
-    MatNullSpace rigidBodyModes;
-    check(MatNullSpaceCreateRigidBody(coordinates, &rigidBodyModes), "MatNullSpaceCreateRigidBody");
-    check(MatSetNearNullSpace(A_, rigidBodyModes), "MatSetNearNullSpace");
-    MatNullSpaceDestroy(&rigidBodyModes);
-    VecDestroy(&coordinates);
+    eliminate(job.fixedNodes); // keeping A symmetric
+    setRigidBodyModes();
     result_.assemblySeconds = maxOverRanks(MPI_Wtime() - clock);
 
-    // -- Solver: the tuned default, then the job's options over it; set up once.
     clock = MPI_Wtime();
     progress(rank, "setup", 0.0);
-    check(KSPCreate(PETSC_COMM_WORLD, &ksp_), "KSPCreate");
-    check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
-    PC pc;
-    check(KSPGetPC(ksp_, &pc), "KSPGetPC");
-    setTunedDefault(ksp_, pc, result_.equations, size, served);
-    if (KSPSetFromOptions(ksp_)) throw WorkerFailure(2, "the solver options are refused (" + job.solverOptions + ")");
-    KSPType kspType;
-    PCType pcType;
-    check(KSPGetType(ksp_, &kspType), "KSPGetType");
-    // The imposed values are a good start for an iterative solver (a direct one takes none).
-    check(KSPSetInitialGuessNonzero(ksp_, std::string(kspType) == KSPPREONLY ? PETSC_FALSE : PETSC_TRUE), "KSPSetInitialGuessNonzero");
-    check(KSPSetUp(ksp_), "KSPSetUp");
-    check(PCSetUp(pc), "PCSetUp");
-    // Block preconditioners (block Jacobi, ASM) factor their blocks on the first solve unless told
-    // now: that work belongs to the preparation.
-    check(KSPSetUpOnBlocks(ksp_), "KSPSetUpOnBlocks");
-    check(PCGetType(pc, &pcType), "PCGetType");
-    result_.solver = std::string(kspType) + "+" + pcType;
-    if (std::string(pcType) == PCBJACOBI) { // and what each block holds, e.g. cg+bjacobi/icc
-      PetscInt blocks = 0;
-      KSP* subSolvers = nullptr;
-      check(PCBJacobiGetSubKSP(pc, &blocks, nullptr, &subSolvers), "PCBJacobiGetSubKSP");
-      if (blocks > 0) {
-        PC subPc;
-        PCType subType;
-        check(KSPGetPC(subSolvers[0], &subPc), "KSPGetPC");
-        check(PCGetType(subPc, &subType), "PCGetType");
-        result_.solver += std::string("/") + subType;
-      }
-    }
-    if (std::string(pcType) == PCCHOLESKY || std::string(pcType) == PCLU) {
-      MatSolverType package = nullptr;
-      check(PCFactorGetMatSolverType(pc, &package), "PCFactorGetMatSolverType");
-      result_.solver = std::string(pcType) + "+" + (package ? package : MATSOLVERPETSC); // e.g. cholesky+cholmod
-    }
+    setUpSolver(served);
     result_.setupSeconds = maxOverRanks(MPI_Wtime() - clock);
     check(MatCreateVecs(A_, &x_, &b_), "MatCreateVecs");
     if (served) requireEveryOptionRead(true);
@@ -526,6 +405,162 @@ public:
   }
 
 private:
+  /// This rank's part of the assembly: the tetrahedra it assembles (those whose first node it
+  /// owns) and, for each node it owns, how many neighbouring nodes' blocks of 3 fall in its own
+  /// columns and in other ranks' (the preallocation).
+  struct AssemblyShare {
+    std::vector<std::size_t> tetrahedra;
+    std::vector<PetscInt> diagonalBlocks, offDiagonalBlocks;
+  };
+
+  AssemblyShare assemblyShare() const
+  {
+    AssemblyShare share;
+    std::vector<std::vector<PetscInt>> blockNeighbours(static_cast<std::size_t>(owned_));
+    for (std::size_t t = 0; t < job_.tetrahedronCount(); ++t) {
+      PetscInt v[4];
+      for (int k = 0; k < 4; ++k) v[k] = numbering_.newOfOld[std::size_t(job_.tetrahedra[4 * t + k])];
+      if (mine(v[0])) share.tetrahedra.push_back(t);
+      for (int a = 0; a < 4; ++a) {
+        if (!mine(v[a])) continue;
+        for (int b = 0; b < 4; ++b) blockNeighbours[std::size_t(v[a] - first_)].push_back(v[b]);
+      }
+    }
+    share.diagonalBlocks.assign(static_cast<std::size_t>(owned_), 0);
+    share.offDiagonalBlocks.assign(static_cast<std::size_t>(owned_), 0);
+    for (PetscInt i = 0; i < owned_; ++i) {
+      auto& list = blockNeighbours[std::size_t(i)];
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+      for (PetscInt c : list) (mine(c) ? share.diagonalBlocks : share.offDiagonalBlocks)[std::size_t(i)] += 1;
+      if (list.empty()) share.diagonalBlocks[std::size_t(i)] = 1; // a node in no tetrahedron (kept solvable)
+      std::vector<PetscInt>().swap(list);
+    }
+    return share;
+  }
+
+  /// The stiffness matrix, empty: block rows of 3, exactly preallocated (a new nonzero is an error).
+  void createPreallocatedMatrix(const AssemblyShare& share)
+  {
+    check(MatCreate(PETSC_COMM_WORLD, &A_), "MatCreate");
+    check(MatSetSizes(A_, 3 * owned_, 3 * owned_, 3 * n_, 3 * n_), "MatSetSizes");
+    check(MatSetBlockSize(A_, 3), "MatSetBlockSize");
+    check(MatSetType(A_, MATAIJ), "MatSetType");
+    check(MatSetOptionsPrefix(A_, "elasticity_"), "MatSetOptionsPrefix");
+    check(MatSetFromOptions(A_), "MatSetFromOptions");
+    check(MatXAIJSetPreallocation(A_, 3, share.diagonalBlocks.data(), share.offDiagonalBlocks.data(), nullptr, nullptr),
+          "MatXAIJSetPreallocation");
+    check(MatSetOption(A_, MAT_NEW_NONZERO_ALLOCATION_ERR, PETSC_TRUE), "MatSetOption");
+  }
+
+  /// Each tetrahedron's stiffness added in; a node in no tetrahedron gets the identity.
+  void assemble(const AssemblyShare& share)
+  {
+    for (std::size_t t : share.tetrahedra) {
+      double p[4][3];
+      PetscInt blocks[4];
+      for (int k = 0; k < 4; ++k) {
+        const std::size_t old = std::size_t(job_.tetrahedra[4 * t + k]);
+        for (int d = 0; d < 3; ++d) p[k][d] = job_.nodes[3 * old + d];
+        blocks[k] = numbering_.newOfOld[old];
+      }
+      double K[144];
+      tetrahedronStiffness(p, job_.materials[std::size_t(job_.materialOfTetrahedron[t])], K);
+      check(MatSetValuesBlocked(A_, 4, blocks, 4, blocks, K, ADD_VALUES), "MatSetValuesBlocked");
+    }
+    for (PetscInt i = 0; i < owned_; ++i) {
+      if (share.offDiagonalBlocks[std::size_t(i)] == 0 && share.diagonalBlocks[std::size_t(i)] == 1) {
+        const PetscInt row = first_ + i;
+        const double identity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        check(MatSetValuesBlocked(A_, 1, &row, 1, &row, identity, ADD_VALUES), "MatSetValuesBlocked");
+      }
+    }
+    check(MatAssemblyBegin(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyBegin");
+    check(MatAssemblyEnd(A_, MAT_FINAL_ASSEMBLY), "MatAssemblyEnd");
+    // Symmetric positive definite, and stays so through every elimination (1 on the diagonal of a
+    // fixed dof) and soft constraint (H^T W H added): said once for good. (Positive definite as long
+    // as the fixed nodes pin every piece of the mesh, as the surface's imposed nodes do; a piece
+    // left free is singular either way, and its solve fails its true-residual check.) A factorisation then
+    // takes it without pivoting (MUMPS's SYM=1, not the symmetric indefinite SYM=2, whose pivots
+    // follow the rounding of the ranks' sums and once outgrew MUMPS's memory estimate: KSP reason
+    // -11 in a fresh-clone run of FiniteElementSessionTest).
+    check(MatSetOption(A_, MAT_SPD, PETSC_TRUE), "MatSetOption");
+    check(MatSetOption(A_, MAT_SPD_ETERNAL, PETSC_TRUE), "MatSetOption");
+    std::int64_t mineCount = std::int64_t(share.tetrahedra.size());
+    result_.tetrahedraPerRank.resize(std::size_t(size_));
+    MPI_Allgather(&mineCount, 1, MPI_INT64_T, result_.tetrahedraPerRank.data(), 1, MPI_INT64_T, PETSC_COMM_WORLD);
+  }
+
+  /// The rigid body modes as the operator's near-nullspace, for the multigrid (coordinates in the
+  /// new numbering).
+  void setRigidBodyModes()
+  {
+    Vec coordinates;
+    check(VecCreateMPI(PETSC_COMM_WORLD, 3 * owned_, 3 * n_, &coordinates), "VecCreateMPI");
+    check(VecSetBlockSize(coordinates, 3), "VecSetBlockSize");
+    PetscScalar* c;
+    check(VecGetArray(coordinates, &c), "VecGetArray");
+    for (PetscInt old = 0; old < n_; ++old) {
+      const PetscInt node = numbering_.newOfOld[std::size_t(old)];
+      if (!mine(node)) continue;
+      for (int d = 0; d < 3; ++d) c[3 * (node - first_) + d] = job_.nodes[3 * std::size_t(old) + std::size_t(d)];
+    }
+    check(VecRestoreArray(coordinates, &c), "VecRestoreArray");
+    MatNullSpace rigidBodyModes;
+    check(MatNullSpaceCreateRigidBody(coordinates, &rigidBodyModes), "MatNullSpaceCreateRigidBody");
+    check(MatSetNearNullSpace(A_, rigidBodyModes), "MatSetNearNullSpace");
+    MatNullSpaceDestroy(&rigidBodyModes);
+    VecDestroy(&coordinates);
+  }
+
+  /// The solver: the tuned default, then the job's options over it; set up once, here.
+  void setUpSolver(bool served)
+  {
+    check(KSPCreate(PETSC_COMM_WORLD, &ksp_), "KSPCreate");
+    check(KSPSetOperators(ksp_, A_, A_), "KSPSetOperators");
+    PC pc;
+    check(KSPGetPC(ksp_, &pc), "KSPGetPC");
+    setTunedDefault(ksp_, pc, result_.equations, size_, served);
+    if (KSPSetFromOptions(ksp_)) throw WorkerFailure(2, "the solver options are refused (" + job_.solverOptions + ")");
+    KSPType kspType;
+    check(KSPGetType(ksp_, &kspType), "KSPGetType");
+    // The imposed values are a good start for an iterative solver (a direct one takes none).
+    check(KSPSetInitialGuessNonzero(ksp_, std::string(kspType) == KSPPREONLY ? PETSC_FALSE : PETSC_TRUE), "KSPSetInitialGuessNonzero");
+    check(KSPSetUp(ksp_), "KSPSetUp");
+    check(PCSetUp(pc), "PCSetUp");
+    // Block preconditioners (block Jacobi, ASM) factor their blocks on the first solve unless told
+    // now: that work belongs to the preparation.
+    check(KSPSetUpOnBlocks(ksp_), "KSPSetUpOnBlocks");
+    result_.solver = solverName(kspType, pc);
+  }
+
+  /// What solves, for the report: e.g. cg+bjacobi/icc (block Jacobi and what each block holds),
+  /// cholesky+cholmod (a factorisation and its package).
+  static std::string solverName(KSPType kspType, PC pc)
+  {
+    PCType pcType;
+    check(PCGetType(pc, &pcType), "PCGetType");
+    if (std::string(pcType) == PCCHOLESKY || std::string(pcType) == PCLU) {
+      MatSolverType package = nullptr;
+      check(PCFactorGetMatSolverType(pc, &package), "PCFactorGetMatSolverType");
+      return std::string(pcType) + "+" + (package ? package : MATSOLVERPETSC);
+    }
+    std::string name = std::string(kspType) + "+" + pcType;
+    if (std::string(pcType) == PCBJACOBI) {
+      PetscInt blocks = 0;
+      KSP* subSolvers = nullptr;
+      check(PCBJacobiGetSubKSP(pc, &blocks, nullptr, &subSolvers), "PCBJacobiGetSubKSP");
+      if (blocks > 0) {
+        PC subPc;
+        PCType subType;
+        check(KSPGetPC(subSolvers[0], &subPc), "KSPGetPC");
+        check(PCGetType(subPc, &subType), "PCGetType");
+        name += std::string("/") + subType;
+      }
+    }
+    return name;
+  }
+
   bool mine(PetscInt newNode) const { return newNode >= first_ && newNode < first_ + owned_; }
 
   /// Whatever reason PETSc gives (a Richardson run stopped by -ksp_max_it, a NaN from absurd

@@ -1,0 +1,125 @@
+// What a run leaves behind when it is ended: the temporaries of runs that were killed outright are
+// found by their process id and removed (and only theirs); a signal's cleanup terminates the
+// workers' process groups (SIGKILL for one that ignores SIGTERM) and removes the registered paths.
+#include "BrainShiftTestingSupport.h"
+#include "ProcessCleanup.h"
+
+#include <csignal>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace {
+namespace fs = std::filesystem;
+
+/// The id of a process that has run and been reaped: no process has it (until the ids wrap).
+pid_t endedProcessId()
+{
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  return child;
+}
+
+/// A worker in a process group of its own (as the launcher starts mpiexec), sleeping; with
+/// `ignoreTerm` it ignores SIGTERM, as a hung worker may.
+pid_t startWorkerGroup(bool ignoreTerm)
+{
+  const pid_t child = ::fork();
+  if (child == 0) {
+    ::setpgid(0, 0);
+    if (ignoreTerm) std::signal(SIGTERM, SIG_IGN);
+    for (;;) ::pause();
+  }
+  ::setpgid(child, child); // either side may win the race; both set the same group
+  return child;
+}
+
+/// Runs the signal-time cleanup in a child process (it ends the registry for good) and returns
+/// its exit code: 0 when both workers ended by the expected signal and the paths are gone.
+int cleanupInChild(const fs::path& temporaryFile, const fs::path& temporaryFolder)
+{
+  const pid_t child = ::fork();
+  if (child == 0) {
+    using namespace brainshift;
+    const pid_t polite = startWorkerGroup(false);
+    const pid_t stubborn = startWorkerGroup(true);
+    ::usleep(100000); // let the stubborn one install its SIG_IGN
+    cleanup::addProcessGroup(polite);
+    cleanup::addProcessGroup(stubborn);
+    cleanup::addTemporaryPath(temporaryFile);
+    cleanup::addTemporaryPath(temporaryFolder);
+    cleanup::terminateAndRemoveAll(0.3);
+    int politeStatus = 0, stubbornStatus = 0;
+    ::waitpid(polite, &politeStatus, 0);
+    ::waitpid(stubborn, &stubbornStatus, 0);
+    const bool politeByTerm = WIFSIGNALED(politeStatus) && WTERMSIG(politeStatus) == SIGTERM;
+    const bool stubbornByKill = WIFSIGNALED(stubbornStatus) && WTERMSIG(stubbornStatus) == SIGKILL;
+    const bool pathsGone = !fs::exists(temporaryFile) && !fs::exists(temporaryFolder);
+    ::_exit((politeByTerm ? 0 : 1) | (stubbornByKill ? 0 : 2) | (pathsGone ? 0 : 4));
+  }
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 100;
+}
+} // namespace
+
+int ProcessCleanupTest(int, char*[])
+{
+  return brainshift::testing::runTest("ProcessCleanupTest", [] {
+    using namespace brainshift;
+    const fs::path folder = testing::temporaryFolder("ProcessCleanupTest");
+    const std::string dead = std::to_string(endedProcessId());
+    const std::string self = std::to_string(::getpid());
+
+    // A killed run's leftovers: a file and a folder (a worker's job folder) under its process id.
+    std::ofstream(folder / (".tmp-" + dead + "-0-warped.nii.gz")) << "half a volume";
+    fs::create_directories(folder / (".tmp-" + dead + "-1-job") / "inside");
+    std::ofstream(folder / (".tmp-" + dead + "-1-job") / "inside" / "nodes.bin") << "x";
+    // Kept: this run's own, a live process's (pid 1), names that only look alike, real outputs.
+    std::ofstream(folder / (".tmp-" + self + "-0-report.json")) << "{}";
+    std::ofstream(folder / ".tmp-1-0-scene.mrml") << "<MRML/>";
+    std::ofstream(folder / ".tmp-abc-0-labels.nii.gz") << "x";
+    std::ofstream(folder / ".tmp--0-x") << "x";
+    std::ofstream(folder / ("tmp-" + dead + "-0-output.nii.gz")) << "x";
+    std::ofstream(folder / "report.json") << "{}";
+
+    BS_CHECK(cleanup::removeStaleTemporaries(folder) == 2);
+    BS_CHECK(!fs::exists(folder / (".tmp-" + dead + "-0-warped.nii.gz")));
+    BS_CHECK(!fs::exists(folder / (".tmp-" + dead + "-1-job")));
+    for (const std::string kept : {".tmp-" + self + "-0-report.json", std::string(".tmp-1-0-scene.mrml"),
+                                   std::string(".tmp-abc-0-labels.nii.gz"), std::string(".tmp--0-x"),
+                                   "tmp-" + dead + "-0-output.nii.gz", std::string("report.json")}) {
+      BS_CHECK_MSG(fs::exists(folder / kept), kept);
+    }
+    BS_CHECK(cleanup::removeStaleTemporaries(folder) == 0);
+    BS_CHECK(cleanup::removeStaleTemporaries(folder / "no-such-folder") == 0);
+
+    // The signal-time cleanup: workers ended (the stubborn one by SIGKILL after the grace), paths
+    // registered and still present removed, a path withdrawn (committed) left alone.
+    const fs::path pending = folder / ".tmp-pending-mesh.vtu";
+    const fs::path jobFolder = folder / "job";
+    std::ofstream(pending) << "partial";
+    fs::create_directories(jobFolder / "sub");
+    const int outcome = cleanupInChild(pending, jobFolder);
+    BS_CHECK_MSG(outcome == 0, "exit " << outcome << " (1: a worker outlived SIGTERM, 2: the one ignoring it was "
+                                          "not killed, 4: a registered path is still there)");
+    BS_CHECK(fs::exists(folder / "report.json"));
+
+    const fs::path committed = folder / "committed.json";
+    std::ofstream(committed) << "{}";
+    cleanup::addTemporaryPath(committed);
+    cleanup::withdrawTemporaryPath(committed);
+    const pid_t child = ::fork();
+    if (child == 0) {
+      cleanup::terminateAndRemoveAll(0.0);
+      ::_exit(0);
+    }
+    int status = 0;
+    ::waitpid(child, &status, 0);
+    BS_CHECK(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+    BS_CHECK(fs::exists(committed));
+  });
+}
