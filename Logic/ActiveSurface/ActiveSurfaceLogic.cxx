@@ -31,6 +31,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <iomanip>
 #include <sstream>
 
 namespace brainshift {
@@ -1287,6 +1288,61 @@ void correctMembraneResidual(FitOutcome& fit, const Eigen::SparseMatrix<double>&
   result.residualCorrectionMaxMm = largest;
 }
 
+/// Unit normals of the surface at `positions` (each node's triangles' normals, area-weighted),
+/// pointing away from its centroid on the whole: outward on a closed brain surface.
+Eigen::MatrixXd outwardNormals(const Eigen::MatrixXd& positions, const SurfaceTopology& topology)
+{
+  Eigen::MatrixXd normals = Eigen::MatrixXd::Zero(positions.rows(), 3);
+  for (const auto& t : topology.triangles) {
+    const Eigen::RowVector3d a = positions.row(t[0]), b = positions.row(t[1]), c = positions.row(t[2]);
+    const Eigen::RowVector3d areaNormal = (b - a).cross(c - a);
+    for (vtkIdType corner : t) normals.row(corner) += areaNormal;
+  }
+  const Eigen::RowVector3d centroid = positions.colwise().mean();
+  double outwardness = 0;
+  for (Eigen::Index i = 0; i < positions.rows(); ++i) {
+    const double length = normals.row(i).norm();
+    if (length > 0) normals.row(i) /= length;
+    outwardness += normals.row(i).dot(positions.row(i) - centroid);
+  }
+  if (outwardness < 0) normals = -normals;
+  return normals;
+}
+
+/// The segmentation's offset at the brain boundary. A craniotomy moves part of the brain surface;
+/// the rest stays against the skull. Over the nodes the segmentation placed (matched, not by the
+/// image's edge) the median move along the outward normal is then what the whole boundary shares:
+/// where this scan's classification puts the brain's edge against where the preoperative labels put
+/// it (T2's bright fluid against the cortex: 0.8-1.0 mm inside on the scenarios), or a change of the
+/// whole brain. The solve carries it into the brain beneath the whole surface (README, "Active
+/// surface"); beyond `boundaryOffsetWarningMm` a warning says so. It is not taken off: where the
+/// brain moved the segmentation's error can be the other way (T2's gap fluid called brain), and a
+/// uniform correction doubled the boundary's error there. Not measured when those nodes cover less
+/// than `boundaryOffsetMinimumShare` of the surface (a slab may see mostly the region that moved).
+void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
+                               const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                               ActiveSurfaceResult& result)
+{
+  const Eigen::MatrixXd normals = outwardNormals(preopBoundary, topology);
+  std::vector<double> normalMoves; // of the nodes the segmentation placed
+  for (Eigen::Index i = 0; i < preopBoundary.rows(); ++i) {
+    const std::size_t node = std::size_t(i);
+    if (freeReason[node] != 0 || fit.imageUsed[node]) continue;
+    normalMoves.push_back((fit.positions.row(i) - preopBoundary.row(i)).dot(normals.row(i)));
+  }
+  if (normalMoves.empty() || double(normalMoves.size()) < p.boundaryOffsetMinimumShare * double(preopBoundary.rows())) return;
+  result.boundaryOffsetMm = median(normalMoves);
+  result.boundaryOffsetNodes = normalMoves.size();
+  if (!(std::abs(result.boundaryOffsetMm) > p.boundaryOffsetWarningMm)) return;
+  std::ostringstream w;
+  w << "surface: over most of the brain surface the intraoperative brain boundary lies " << std::fixed << std::setprecision(1)
+    << std::abs(result.boundaryOffsetMm) << " mm " << (result.boundaryOffsetMm < 0 ? "inside" : "outside")
+    << " the preoperative one (median of " << normalMoves.size()
+    << " surface nodes): this scan's classification draws the brain's edge elsewhere than the preoperative labels, or the "
+       "whole brain changed; the update moves the brain beneath its whole surface by about as much (check the classification)";
+  result.warnings.push_back(w.str());
+}
+
 /// Each node's displacement from its preoperative boundary point: snapped onto the target boundary
 /// where asked, zero where held outside the image; the surface must not have folded.
 Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
@@ -1494,6 +1550,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
 
   // -- Nodes left free, the figures, and the deformed surface.
   summariseMatch(fitted.fit, initialResiduals, freeReason, p, result);
+  measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, p, result);
   const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
   result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;

@@ -92,6 +92,15 @@ struct ActiveSurfaceParameters {
   /// of a deep sink, is taken up; the boundary's roughness stays filtered. On: chosen on the
   /// scenarios' finite element truths (README, "Active surface").
   bool residualCorrection = true;
+  /// The segmentation's offset at the brain boundary (measureSegmentationOffset in the .cxx): the
+  /// median move of the nodes it placed along their outward normal. Over a surface most of which
+  /// did not move it is where this scan's classification puts the brain's edge against where the
+  /// preoperative labels put it, and the solve carries it into the brain beneath the whole surface.
+  /// Beyond this (mm, either way) a warning says so.
+  double boundaryOffsetWarningMm = 0.5;
+  /// Measured only when the nodes the segmentation placed cover at least this share of the surface
+  /// (a slab's view may be mostly the region that moved).
+  double boundaryOffsetMinimumShare = 0.6;
   /// A partial field of view (a slab around the craniotomy): the surface nodes it does not cover
   /// are left free for the elastic model (false), or held at rest where the skull holds them (true:
   /// imposed, zero displacement).
@@ -134,6 +143,11 @@ struct ActiveSurfaceResult {
   std::size_t unsnappedNodes = 0;    ///< nodes kept at the membrane's position (snapping would turn a triangle over)
   /// The residual correction (residualCorrection): its mean length over the matched nodes and its largest (mm).
   double residualCorrectionMeanMm = 0, residualCorrectionMaxMm = 0;
+  /// The segmentation's offset at the brain boundary (boundaryOffsetWarningMm): the median move of
+  /// the nodes it placed along the outward normal (mm; negative: inside the preoperative boundary)
+  /// and over how many nodes (0: not measured).
+  double boundaryOffsetMm = 0;
+  std::size_t boundaryOffsetNodes = 0;
   /// The fit to the preoperative boundary (mesh and preoperative labels only: could be prepared
   /// before surgery), the intraoperative target's distance map, the intraoperative iterations.
   double preopBoundarySeconds = 0, targetSeconds = 0, iterationSeconds = 0;

@@ -306,6 +306,83 @@ void deepSinkReachesItsBottom()
   BS_CHECK(corrected.flippedTriangles == 0 && corrected.residualCorrectionMaxMm > 0.3);
 }
 
+/// The segmentation's own offset: the intraoperative brain is the preoperative sphere (35 mm)
+/// with a sink of 6 mm at the top (a Gaussian of 10 mm); its segmentation puts the whole boundary
+/// `bias` mm inside (a contrast that shows the edge elsewhere). Returns the mean radial
+/// move of the nodes far from the sink (more than 30 mm off its axis, or below the equator) and of
+/// those at its bottom (within 4 mm of the axis).
+struct OffsetCase {
+  ActiveSurfaceResult result;
+  double farMoveMm = 0, sinkMoveMm = 0;
+};
+OffsetCase sinkSeenWithOffset(double bias, const ActiveSurfaceParameters& parameters)
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, false, false);
+  const LabelMapMesh mesh = meshLabelMap(*preop, sphereMeshing());
+  auto identity = itk::Euler3DTransform<double>::New();
+  auto sinkAt = [](const PhysicalPoint& x) {
+    const double offAxis = std::hypot(x[0] - sphereCentre[0], x[1] - sphereCentre[1]);
+    return x[2] > sphereCentre[2] ? 6.0 * std::exp(-offAxis * offAxis / (2 * 10.0 * 10.0)) : 0.0;
+  };
+  auto segmented = brainshift::testing::makeImage<LabelImage>(preopGrid());
+  itk::ImageRegionIteratorWithIndex<LabelImage> it(segmented, segmented->GetLargestPossibleRegion());
+  for (; !it.IsAtEnd(); ++it) {
+    PhysicalPoint x;
+    segmented->TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    it.Set(x.EuclideanDistanceTo(sphereCentre) <= 35.0 - sinkAt(x) - bias ? 2 : 0);
+  }
+  OffsetCase c;
+  c.result = deformBrainSurface(mesh.mesh, preop.GetPointer(), *segmented, nullptr, *identity, parameters);
+  vtkDataArray* u = c.result.surface->GetPointData()->GetArray("Displacement");
+  double far = 0, sink = 0;
+  int farCount = 0, sinkCount = 0;
+  for (vtkIdType i = 0; i < c.result.surface->GetNumberOfPoints(); ++i) {
+    double moved[3], d[3];
+    c.result.surface->GetPoint(i, moved);
+    u->GetTuple(i, d);
+    const PhysicalPoint before = point(moved[0] - d[0], moved[1] - d[1], moved[2] - d[2]);
+    const double r = before.EuclideanDistanceTo(sphereCentre);
+    double move = 0; // along the outward radius
+    for (int a = 0; a < 3; ++a) move += d[a] * (before[a] - sphereCentre[a]) / r;
+    const double offAxis = std::hypot(before[0] - sphereCentre[0], before[1] - sphereCentre[1]);
+    if (offAxis > 30.0 || before[2] < sphereCentre[2]) {
+      far += move;
+      ++farCount;
+    } else if (offAxis < 4.0) {
+      sink += move;
+      ++sinkCount;
+    }
+  }
+  BS_CHECK(farCount > 100 && sinkCount >= 3);
+  c.farMoveMm = far / farCount;
+  c.sinkMoveMm = sink / sinkCount;
+  return c;
+}
+
+/// A segmentation that puts the whole boundary 1 mm inside: the offset is measured (the median
+/// normal move, within 0.3 mm) and a warning says the update carries it into the brain; the same
+/// sink segmented without an offset measures none (within 0.3 mm) and warns of nothing.
+void segmentationOffsetIsReported()
+{
+  const OffsetCase offset = sinkSeenWithOffset(1.0, ActiveSurfaceParameters{});
+  const OffsetCase none = sinkSeenWithOffset(0.0, ActiveSurfaceParameters{});
+  std::cout << "segmentation offset 1 mm: measured " << offset.result.boundaryOffsetMm << " mm over " << offset.result.boundaryOffsetNodes
+            << " nodes (far from the sink the surface moved " << offset.farMoveMm << " mm); none: " << none.result.boundaryOffsetMm
+            << " mm (" << none.farMoveMm << " mm)\n";
+  auto warnsOfOffset = [](const ActiveSurfaceResult& r) {
+    for (const std::string& w : r.warnings) {
+      if (w.find("mm inside the preoperative one") != std::string::npos) return true;
+    }
+    return false;
+  };
+  BS_CHECK_NEAR(offset.result.boundaryOffsetMm, -1.0, 0.3);
+  BS_CHECK(offset.result.boundaryOffsetNodes > offset.result.surfaceNodes / 2);
+  BS_CHECK_NEAR(offset.farMoveMm, -1.0, 0.3); // measured, not taken off
+  BS_CHECK(warnsOfOffset(offset.result));
+  BS_CHECK_NEAR(none.result.boundaryOffsetMm, 0.0, 0.3);
+  BS_CHECK(!warnsOfOffset(none.result));
+}
+
 /// An axial slab through the sphere's middle (`slices` of 2.5 mm) as the intraoperative grid.
 ImageGeometry slabGrid(std::size_t slices)
 {
@@ -481,6 +558,7 @@ int ActiveSurfaceTest(int, char*[])
     imageGuardsAgainstAWrongSegmentation();
     resectedTumourIsFree();
     deepSinkReachesItsBottom();
+    segmentationOffsetIsReported();
     slabFieldOfView();
     badInput();
     smallCaseAgainstTruth();
