@@ -24,16 +24,26 @@ pid_t endedProcessId()
 }
 
 /// A worker in a process group of its own (as the launcher starts mpiexec), sleeping; with
-/// `ignoreTerm` it ignores SIGTERM, as a hung worker may.
+/// `ignoreTerm` it ignores SIGTERM, as a hung worker may. Returns once the worker is set up (it
+/// says so through a pipe), so no signal can reach it before.
 pid_t startWorkerGroup(bool ignoreTerm)
 {
+  int ready[2];
+  if (::pipe(ready) != 0) ::_exit(8);
   const pid_t child = ::fork();
   if (child == 0) {
     ::setpgid(0, 0);
     if (ignoreTerm) std::signal(SIGTERM, SIG_IGN);
+    const char byte = 1;
+    if (::write(ready[1], &byte, 1) != 1) ::_exit(8);
     for (;;) ::pause();
   }
   ::setpgid(child, child); // either side may win the race; both set the same group
+  char byte = 0;
+  const bool told = ::read(ready[0], &byte, 1) == 1;
+  ::close(ready[0]);
+  ::close(ready[1]);
+  if (!told) ::_exit(8);
   return child;
 }
 
@@ -46,7 +56,6 @@ int cleanupInChild(const fs::path& temporaryFile, const fs::path& temporaryFolde
     using namespace brainshift;
     const pid_t polite = startWorkerGroup(false);
     const pid_t stubborn = startWorkerGroup(true);
-    ::usleep(100000); // let the stubborn one install its SIG_IGN
     cleanup::addProcessGroup(polite);
     cleanup::addProcessGroup(stubborn);
     cleanup::addTemporaryPath(temporaryFile);
@@ -105,7 +114,7 @@ int ProcessCleanupTest(int, char*[])
     fs::create_directories(jobFolder / "sub");
     const int outcome = cleanupInChild(pending, jobFolder);
     BS_CHECK_MSG(outcome == 0, "exit " << outcome << " (1: a worker outlived SIGTERM, 2: the one ignoring it was "
-                                          "not killed, 4: a registered path is still there)");
+                                          "not killed, 4: a registered path is still there, 8: a worker could not be started)");
     BS_CHECK(fs::exists(folder / "report.json"));
 
     const fs::path committed = folder / "committed.json";
