@@ -105,7 +105,8 @@ std::size_t removeStaleTemporaries(const fs::path& folder)
     if (name.rfind(".tmp-", 0) != 0) continue;
     std::size_t end = 5;
     while (end < name.size() && std::isdigit(static_cast<unsigned char>(name[end]))) ++end;
-    if (end == 5 || end >= name.size() || name[end] != '-') continue;
+    // A process id has at most 9 digits here (pid_max <= 4,194,304); longer digits are not ours.
+    if (end == 5 || end > 5 + 9 || end >= name.size() || name[end] != '-') continue;
     const pid_t owner = pid_t(std::stol(name.substr(5, end - 5)));
     if (owner == ::getpid() || ::kill(owner, 0) == 0 || errno == EPERM) continue;
     std::error_code ignored;

@@ -26,12 +26,12 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <memory>
 #include <map>
 #include <optional>
 #include <set>
-#include <iomanip>
 #include <sstream>
 
 namespace brainshift {
@@ -915,6 +915,8 @@ void ActiveSurfaceParameters::validate() const
   require(std::isfinite(imageTrustMm) && imageTrustMm > 0, "the image trust range must be > 0 mm");
   require(std::isfinite(unmatchedResidualMm) && unmatchedResidualMm > 0, "the unmatched residual must be > 0 mm");
   require(std::isfinite(resectedFraction) && resectedFraction >= 0 && resectedFraction <= 1, "the resected fraction must be in [0, 1]");
+  require(std::isfinite(boundaryOffsetWarningMm) && boundaryOffsetWarningMm >= 0, "the boundary offset's warning must be >= 0 mm");
+  require(boundaryOffsetMinimumShare >= 0 && boundaryOffsetMinimumShare <= 1, "the boundary offset's share must be in [0, 1]");
   require(!brainLabels.empty(), "no brain labels");
 }
 
@@ -1313,7 +1315,7 @@ Eigen::MatrixXd outwardNormals(const Eigen::MatrixXd& positions, const SurfaceTo
 /// the rest stays against the skull. Over the nodes the segmentation placed (matched, not by the
 /// image's edge) the median move along the outward normal is then what the whole boundary shares:
 /// where this scan's classification puts the brain's edge against where the preoperative labels put
-/// it (T2's bright fluid against the cortex: 0.8-1.0 mm inside on the scenarios), or a change of the
+/// it (T2's bright fluid against the cortex: 0.85-1.09 mm inside on the scenarios), or a change of the
 /// whole brain. The solve carries it into the brain beneath the whole surface (README, "Active
 /// surface"); beyond `boundaryOffsetWarningMm` a warning says so. It is not taken off: where the
 /// brain moved the segmentation's error can be the other way (T2's gap fluid called brain), and a
@@ -1550,7 +1552,9 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
 
   // -- Nodes left free, the figures, and the deformed surface.
   summariseMatch(fitted.fit, initialResiduals, freeReason, p, result);
-  measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, p, result);
+  // Measured against the preoperative boundary only (without it the mesh's own surface stands in,
+  // and its meshing would count as an offset).
+  if (preopLabels || previousSurface) measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, p, result);
   const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
   result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;

@@ -723,7 +723,8 @@ void runSurfaceStage(RunContext& context)
                                         {"residual_correction", {{"applied", parameters.residualCorrection},
                                                                  {"mean_mm", result.residualCorrectionMeanMm},
                                                                  {"max_mm", result.residualCorrectionMaxMm}}},
-                                        {"boundary_offset", {{"median_normal_mm", result.boundaryOffsetMm},
+                                        {"boundary_offset", {{"median_normal_mm", result.boundaryOffsetNodes > 0 ? nlohmann::json(result.boundaryOffsetMm)
+                                                                                                          : nlohmann::json(nullptr)},
                                                              {"nodes", result.boundaryOffsetNodes}}},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
                                         {"preop_boundary_from", known.from},

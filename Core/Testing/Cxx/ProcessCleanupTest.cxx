@@ -24,27 +24,33 @@ pid_t endedProcessId()
 }
 
 /// A worker in a process group of its own (as the launcher starts mpiexec), sleeping; with
-/// `ignoreTerm` it ignores SIGTERM, as a hung worker may. Returns once the worker is set up (it
-/// says so through a pipe), so no signal can reach it before.
+/// `ignoreTerm` it ignores SIGTERM, as a hung worker may, else SIGTERM ends it whatever the test's
+/// parent set. Returns once the worker is set up (it says so through a pipe), so no signal can
+/// reach it before; -1 when it could not be started.
 pid_t startWorkerGroup(bool ignoreTerm)
 {
   int ready[2];
-  if (::pipe(ready) != 0) ::_exit(8);
+  if (::pipe(ready) != 0) return -1;
   const pid_t child = ::fork();
   if (child == 0) {
+    ::close(ready[0]);
     ::setpgid(0, 0);
-    if (ignoreTerm) std::signal(SIGTERM, SIG_IGN);
+    std::signal(SIGTERM, ignoreTerm ? SIG_IGN : SIG_DFL);
+    sigset_t term;
+    sigemptyset(&term);
+    sigaddset(&term, SIGTERM);
+    sigprocmask(SIG_UNBLOCK, &term, nullptr);
     const char byte = 1;
-    if (::write(ready[1], &byte, 1) != 1) ::_exit(8);
+    if (::write(ready[1], &byte, 1) != 1) ::_exit(1);
     for (;;) ::pause();
   }
-  ::setpgid(child, child); // either side may win the race; both set the same group
+  ::close(ready[1]); // a worker that dies before it writes ends the read
   char byte = 0;
-  const bool told = ::read(ready[0], &byte, 1) == 1;
+  const bool told = child > 0 && ::read(ready[0], &byte, 1) == 1;
   ::close(ready[0]);
-  ::close(ready[1]);
-  if (!told) ::_exit(8);
-  return child;
+  if (child > 0) ::setpgid(child, child); // either side may win the race; both set the same group
+  if (!told && child > 0) ::kill(-child, SIGKILL);
+  return told ? child : -1;
 }
 
 /// Runs the signal-time cleanup in a child process (it ends the registry for good) and returns
@@ -52,10 +58,16 @@ pid_t startWorkerGroup(bool ignoreTerm)
 int cleanupInChild(const fs::path& temporaryFile, const fs::path& temporaryFolder)
 {
   const pid_t child = ::fork();
+  BS_CHECK(child >= 0);
   if (child == 0) {
     using namespace brainshift;
     const pid_t polite = startWorkerGroup(false);
     const pid_t stubborn = startWorkerGroup(true);
+    if (polite < 0 || stubborn < 0) {
+      if (polite > 0) ::kill(-polite, SIGKILL);
+      if (stubborn > 0) ::kill(-stubborn, SIGKILL);
+      ::_exit(8);
+    }
     cleanup::addProcessGroup(polite);
     cleanup::addProcessGroup(stubborn);
     cleanup::addTemporaryPath(temporaryFile);
@@ -70,7 +82,7 @@ int cleanupInChild(const fs::path& temporaryFile, const fs::path& temporaryFolde
     ::_exit((politeByTerm ? 0 : 1) | (stubbornByKill ? 0 : 2) | (pathsGone ? 0 : 4));
   }
   int status = 0;
-  ::waitpid(child, &status, 0);
+  BS_CHECK(::waitpid(child, &status, 0) == child);
   return WIFEXITED(status) ? WEXITSTATUS(status) : 100;
 }
 } // namespace
@@ -92,14 +104,15 @@ int ProcessCleanupTest(int, char*[])
     std::ofstream(folder / ".tmp-1-0-scene.mrml") << "<MRML/>";
     std::ofstream(folder / ".tmp-abc-0-labels.nii.gz") << "x";
     std::ofstream(folder / ".tmp--0-x") << "x";
+    std::ofstream(folder / ".tmp-99999999999999999999-0-x") << "x"; // digits no process id has
     std::ofstream(folder / ("tmp-" + dead + "-0-output.nii.gz")) << "x";
     std::ofstream(folder / "report.json") << "{}";
 
     BS_CHECK(cleanup::removeStaleTemporaries(folder) == 2);
     BS_CHECK(!fs::exists(folder / (".tmp-" + dead + "-0-warped.nii.gz")));
     BS_CHECK(!fs::exists(folder / (".tmp-" + dead + "-1-job")));
-    for (const std::string kept : {".tmp-" + self + "-0-report.json", std::string(".tmp-1-0-scene.mrml"),
-                                   std::string(".tmp-abc-0-labels.nii.gz"), std::string(".tmp--0-x"),
+    for (const std::string& kept : {".tmp-" + self + "-0-report.json", std::string(".tmp-1-0-scene.mrml"),
+                                   std::string(".tmp-abc-0-labels.nii.gz"), std::string(".tmp--0-x"), std::string(".tmp-99999999999999999999-0-x"),
                                    "tmp-" + dead + "-0-output.nii.gz", std::string("report.json")}) {
       BS_CHECK_MSG(fs::exists(folder / kept), kept);
     }
@@ -115,6 +128,7 @@ int ProcessCleanupTest(int, char*[])
     const int outcome = cleanupInChild(pending, jobFolder);
     BS_CHECK_MSG(outcome == 0, "exit " << outcome << " (1: a worker outlived SIGTERM, 2: the one ignoring it was "
                                           "not killed, 4: a registered path is still there, 8: a worker could not be started)");
+    BS_CHECK(!fs::exists(pending) && !fs::exists(jobFolder));
     BS_CHECK(fs::exists(folder / "report.json"));
 
     const fs::path committed = folder / "committed.json";
@@ -122,12 +136,13 @@ int ProcessCleanupTest(int, char*[])
     cleanup::addTemporaryPath(committed);
     cleanup::withdrawTemporaryPath(committed);
     const pid_t child = ::fork();
+    BS_CHECK(child >= 0);
     if (child == 0) {
       cleanup::terminateAndRemoveAll(0.0);
       ::_exit(0);
     }
     int status = 0;
-    ::waitpid(child, &status, 0);
+    BS_CHECK(::waitpid(child, &status, 0) == child);
     BS_CHECK(WIFEXITED(status) && WEXITSTATUS(status) == 0);
     BS_CHECK(fs::exists(committed));
   });

@@ -371,7 +371,7 @@ void segmentationOffsetIsReported()
             << " mm (" << none.farMoveMm << " mm)\n";
   auto warnsOfOffset = [](const ActiveSurfaceResult& r) {
     for (const std::string& w : r.warnings) {
-      if (w.find("mm inside the preoperative one") != std::string::npos) return true;
+      if (w.find("intraoperative brain boundary lies") != std::string::npos) return true;
     }
     return false;
   };
@@ -379,6 +379,7 @@ void segmentationOffsetIsReported()
   BS_CHECK(offset.result.boundaryOffsetNodes > offset.result.surfaceNodes / 2);
   BS_CHECK_NEAR(offset.farMoveMm, -1.0, 0.3); // measured, not taken off
   BS_CHECK(warnsOfOffset(offset.result));
+  BS_CHECK(none.result.boundaryOffsetNodes > none.result.surfaceNodes / 2); // measured, and found none
   BS_CHECK_NEAR(none.result.boundaryOffsetMm, 0.0, 0.3);
   BS_CHECK(!warnsOfOffset(none.result));
 }
@@ -407,6 +408,7 @@ void slabFieldOfView()
             << held.coveredBrainMl << " of " << held.meshedBrainMl << " ml, residual " << held.meanResidualMm << " mm\n";
   BS_CHECK_MSG(share > 0.3 && share < 0.5, share); // a sphere's zone of height h holds h / 2R of its area: 0.39
   BS_CHECK(held.heldOutsideImage + held.coveredSurfaceNodes == held.surfaceNodes && held.freeOutsideImage == 0);
+  BS_CHECK(held.boundaryOffsetNodes == 0); // 39 % of the surface in view: the offset is not measured
   BS_CHECK_MSG(held.coveredBrainMl > 0.3 * held.meshedBrainMl && held.coveredBrainMl < 0.7 * held.meshedBrainMl, held.coveredBrainMl);
   BS_CHECK_MSG(held.meanResidualMm < 0.5, held.meanResidualMm);
   vtkPolyData* s = held.surface;
