@@ -916,6 +916,8 @@ void ActiveSurfaceParameters::validate() const
   require(std::isfinite(unmatchedResidualMm) && unmatchedResidualMm > 0, "the unmatched residual must be > 0 mm");
   require(std::isfinite(resectedFraction) && resectedFraction >= 0 && resectedFraction <= 1, "the resected fraction must be in [0, 1]");
   require(std::isfinite(boundaryOffsetWarningMm) && boundaryOffsetWarningMm >= 0, "the boundary offset's warning must be >= 0 mm");
+  require(std::isfinite(boundaryOffsetWarningVoxels) && boundaryOffsetWarningVoxels >= 0,
+          "the boundary offset's warning must be >= 0 voxels");
   require(boundaryOffsetMinimumShare >= 0 && boundaryOffsetMinimumShare <= 1, "the boundary offset's share must be in [0, 1]");
   require(!brainLabels.empty(), "no brain labels");
 }
@@ -1317,14 +1319,15 @@ Eigen::MatrixXd outwardNormals(const Eigen::MatrixXd& positions, const SurfaceTo
 /// where this scan's classification puts the brain's edge against where the preoperative labels put
 /// it (T2's bright fluid against the cortex: 0.85-1.09 mm inside on the scenarios), or a change of the
 /// whole brain. The solve carries it into the brain beneath the whole surface (README, "Active
-/// surface"); beyond `boundaryOffsetWarningMm` a warning says so. It is not taken off: where the
+/// surface"); beyond `warningMm` a warning says so. It is not taken off: where the
 /// brain moved the segmentation's error can be the other way (T2's gap fluid called brain), and a
 /// uniform correction doubled the boundary's error there. Not measured when those nodes cover less
 /// than `boundaryOffsetMinimumShare` of the surface (a slab may see mostly the region that moved).
 void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
-                               const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                               const std::vector<unsigned char>& freeReason, double warningMm, const ActiveSurfaceParameters& p,
                                ActiveSurfaceResult& result)
 {
+  result.boundaryOffsetWarningMm = warningMm;
   const Eigen::MatrixXd normals = outwardNormals(preopBoundary, topology);
   std::vector<double> normalMoves; // of the nodes the segmentation placed
   for (Eigen::Index i = 0; i < preopBoundary.rows(); ++i) {
@@ -1335,7 +1338,7 @@ void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& pre
   if (normalMoves.empty() || double(normalMoves.size()) < p.boundaryOffsetMinimumShare * double(preopBoundary.rows())) return;
   result.boundaryOffsetMm = median(normalMoves);
   result.boundaryOffsetNodes = normalMoves.size();
-  if (!(std::abs(result.boundaryOffsetMm) > p.boundaryOffsetWarningMm)) return;
+  if (!(std::abs(result.boundaryOffsetMm) > warningMm)) return;
   std::ostringstream w;
   w << "surface: over most of the brain surface the intraoperative brain boundary lies " << std::fixed << std::setprecision(1)
     << std::abs(result.boundaryOffsetMm) << " mm " << (result.boundaryOffsetMm < 0 ? "inside" : "outside")
@@ -1554,7 +1557,11 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   summariseMatch(fitted.fit, initialResiduals, freeReason, p, result);
   // Measured against the preoperative boundary only (without it the mesh's own surface stands in,
   // and its meshing would count as an offset).
-  if (preopLabels || previousSurface) measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, p, result);
+  if (preopLabels || previousSurface) {
+    const double voxelMm = std::cbrt(grid.spacing[0] * grid.spacing[1] * grid.spacing[2]);
+    const double warningMm = std::max(p.boundaryOffsetWarningMm, p.boundaryOffsetWarningVoxels * voxelMm);
+    measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, warningMm, p, result);
+  }
   const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
   result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;

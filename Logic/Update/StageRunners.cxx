@@ -725,7 +725,8 @@ void runSurfaceStage(RunContext& context)
                                                                  {"max_mm", result.residualCorrectionMaxMm}}},
                                         {"boundary_offset", {{"median_normal_mm", result.boundaryOffsetNodes > 0 ? nlohmann::json(result.boundaryOffsetMm)
                                                                                                           : nlohmann::json(nullptr)},
-                                                             {"nodes", result.boundaryOffsetNodes}}},
+                                                             {"nodes", result.boundaryOffsetNodes},
+                                                             {"warning_beyond_mm", result.boundaryOffsetWarningMm}}},
                                         {"preop_boundary_seconds", result.preopBoundarySeconds},
                                         {"preop_boundary_from", known.from},
                                         {"preop_boundary_made_ahead_seconds", known.madeAheadSeconds},

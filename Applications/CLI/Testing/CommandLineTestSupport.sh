@@ -34,6 +34,14 @@ float_check() {
   python3 -c "import sys; sys.exit(0 if float('$value') $3 else 1)" || fail "$1 $2 = $value, expected $3"
 }
 
+# offset_warned REPORT: whether the surface stage warned of the segmentation's offset at the brain boundary.
+offset_warned() {
+  python3 - "$1" <<'PY'
+import json, sys
+sys.exit(0 if any("intraoperative brain boundary lies" in w for w in json.load(open(sys.argv[1]))["warnings"]) else 1)
+PY
+}
+
 checksums() { find "$@" -type f -print0 | sort -z | xargs -0 sha256sum; }
 
 # shift_labels_along_first_axis IN.nii.gz OUT.nii.gz: a damaged segmentation, the label map moved
