@@ -46,9 +46,13 @@ public:
   virtual QString moduleTitle() const = 0;
   /// The module's panel, bound to `scene`. The host owns the scene and outlives the panel.
   virtual QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) = 0;
+  /// Where the module stands in the selector, after the host's Data panel: the surgeon's update
+  /// (10), then the stages in the update's order, each titled as its command (rigid 20, classify 30,
+  /// mesh 40, surface and simulate 50), then review (60) and evaluation (70). Others follow, by title.
+  virtual int modulePosition() const { return 1000; }
 };
 
 } // namespace brainshift
 
-#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.3"
+#define BrainShiftModulePlugin_iid "org.brainshift.ModulePlugin/1.4"
 Q_DECLARE_INTERFACE(brainshift::ModulePlugin, BrainShiftModulePlugin_iid)

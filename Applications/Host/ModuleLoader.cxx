@@ -5,6 +5,8 @@
 #include <QLibrary>
 #include <QPluginLoader>
 
+#include <algorithm>
+
 namespace brainshift {
 
 QString defaultModulesFolder()
@@ -39,6 +41,12 @@ ModuleDiscovery discoverModules(const QString& folder)
     }
     discovery.modules.push_back({file, plugin});
   }
+  // The update's order, not the files' names: the surgeon's module first, then the stages.
+  std::stable_sort(discovery.modules.begin(), discovery.modules.end(), [](const LoadedModule& a, const LoadedModule& b) {
+    const int positionA = a.plugin->modulePosition(), positionB = b.plugin->modulePosition();
+    if (positionA != positionB) return positionA < positionB;
+    return a.plugin->moduleTitle().localeAwareCompare(b.plugin->moduleTitle()) < 0;
+  });
   return discovery;
 }
 

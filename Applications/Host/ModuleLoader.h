@@ -20,7 +20,7 @@ struct ModuleLoadFailure {
 };
 
 struct ModuleDiscovery {
-  std::vector<LoadedModule> modules;     ///< in file name order
+  std::vector<LoadedModule> modules;     ///< by ModulePlugin::modulePosition, then by title
   std::vector<ModuleLoadFailure> failures;
 };
 

@@ -186,7 +186,7 @@ struct ActiveSurfaceInputNames {
 struct Configuration;
 /// The surface stage's parameters from the one configuration (the elastic and image weights, the
 /// iterations, the matching along the sinking direction, snapping, the field of view's hold): what
-/// the command line and the Brain deformation panel start from.
+/// the command line and the Surface and simulation panel start from.
 ActiveSurfaceParameters activeSurfaceParametersFrom(const Configuration& configuration);
 
 ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelImage* preopLabels, const LabelImage& intraopLabels,

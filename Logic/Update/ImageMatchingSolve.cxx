@@ -1,6 +1,6 @@
 // The simulate stage's second solve: blocks of the preoperative image matched inside the brain,
 // starting where the surface-driven solve puts them, and the solve again with the matches as soft
-// constraints, the worst rejected in rounds (Logic/BlockMatching, Logic/Biomechanics).
+// constraints, the worst rejected in rounds (Logic/BlockMatching, Logic/BiomechanicalSimulation).
 #include "ImageMatchingSolve.h"
 
 #include "ImageMatchConstraints.h"

@@ -16,7 +16,7 @@ namespace brainshift {
 /// or nullopt when it can.
 std::optional<std::string> imageMatchingUnavailable(RunContext& context);
 
-/// The stage's side of solveWithImageMatches (Logic/Biomechanics/ImageMatchConstraints.h): reads
+/// The stage's side of solveWithImageMatches (Logic/BiomechanicalSimulation/ImageMatchConstraints.h): reads
 /// the rigid transform and the classification from the output folder, calls it, reports. Returns the final solution (the
 /// surface-driven one when no block
 /// matched); `entry` becomes report.json's simulate.block_matching. Writes block_matches.vtp. Adds

@@ -12,6 +12,7 @@ class EvaluationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Evaluation"); }
+  int modulePosition() const override { return 70; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new EvaluationPanel(scene, context, parent);

@@ -12,6 +12,7 @@ class FusionReviewModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Fusion and review"); }
+  int modulePosition() const override { return 60; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new FusionReviewPanel(scene, context, parent);

@@ -12,6 +12,7 @@ class IntraoperativeUpdateModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Intraoperative update"); }
+  int modulePosition() const override { return 10; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new IntraoperativeUpdatePanel(scene, context, parent);

@@ -12,6 +12,7 @@ class MeshingModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Meshing"); }
+  int modulePosition() const override { return 40; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new MeshingPanel(scene, Configuration::loadOrDefaults(context.configurationFile), parent);

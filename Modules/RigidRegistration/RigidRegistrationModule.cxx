@@ -12,6 +12,7 @@ class RigidRegistrationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Rigid registration"); }
+  int modulePosition() const override { return 20; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new RigidRegistrationPanel(scene, Configuration::loadOrDefaults(context.configurationFile), parent);

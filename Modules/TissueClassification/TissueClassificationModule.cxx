@@ -12,6 +12,7 @@ class TissueClassificationModule : public QObject, public ModulePlugin {
   Q_INTERFACES(brainshift::ModulePlugin)
 public:
   QString moduleTitle() const override { return tr("Tissue classification"); }
+  int modulePosition() const override { return 30; }
   QWidget* createPanel(Scene& scene, const ModuleContext& context, QWidget* parent) override
   {
     return new TissueClassificationPanel(scene, context, parent);

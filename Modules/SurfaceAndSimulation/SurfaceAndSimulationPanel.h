@@ -1,5 +1,5 @@
 #pragma once
-// The brain deformation panel: binds the active surface (ActiveSurfaceLogic) and the finite
+// The surface and simulation panel: binds the active surface (ActiveSurfaceLogic) and the finite
 // element solve (FiniteElementSolver, the MPI worker) to the scene, and, as the command line's
 // `simulate` does by default, the image's block matches inside the brain as soft constraints of a
 // second solve (ImageMatchConstraints.h; both solves on one worker). Inputs: the mesh, the
@@ -34,12 +34,12 @@ namespace brainshift {
 struct ActiveSurfaceResult;
 struct FiniteElementResult;
 
-class BrainDeformationPanel : public QWidget {
+class SurfaceAndSimulationPanel : public QWidget {
   Q_OBJECT
 public:
   /// The surface's and the solve's parameters and the ranks are `configuration`'s, as the command line's.
-  explicit BrainDeformationPanel(Scene& scene, const Configuration& configuration = Configuration{}, QWidget* parent = nullptr);
-  ~BrainDeformationPanel() override;
+  explicit SurfaceAndSimulationPanel(Scene& scene, const Configuration& configuration = Configuration{}, QWidget* parent = nullptr);
+  ~SurfaceAndSimulationPanel() override;
 
   NodeSelector* meshSelector() const { return mesh_; }
   NodeSelector* preopLabelsSelector() const { return preopLabels_; }

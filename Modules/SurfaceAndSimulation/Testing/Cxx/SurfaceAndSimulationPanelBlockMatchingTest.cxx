@@ -1,11 +1,11 @@
-// The brain deformation panel with block matching (on by default, as the command line's
+// The surface and simulation panel with block matching (on by default, as the command line's
 // `simulate`), on the small built-in case: with the preoperative volume chosen (the selector offers
 // the preoperative MRI, not the scan), the blocks are matched between the two solves ("block
 // matching" among the stages), the status says how many matches were kept and how their misfit
 // fell, and the displacements differ from the surface's solve alone (the box unchecked). Checked
 // without a preoperative volume, the solve is the surface's and the status says why.
-#include "BrainDeformationPanel.h"
-#include "BrainDeformationTestScene.h"
+#include "SurfaceAndSimulationPanel.h"
+#include "SurfaceAndSimulationTestScene.h"
 #include "BrainShiftTestingSupport.h"
 
 #include <vtkDataArray.h>
@@ -34,7 +34,7 @@ std::vector<double> displacementsOf(const ModelNode& mesh)
 }
 
 /// Runs the panel once and returns whether it succeeded (its status printed).
-bool runOnce(BrainDeformationPanel& panel, QSignalSpy& finished)
+bool runOnce(SurfaceAndSimulationPanel& panel, QSignalSpy& finished)
 {
   panel.run();
   const bool ended = finished.wait(180000);
@@ -43,15 +43,15 @@ bool runOnce(BrainDeformationPanel& panel, QSignalSpy& finished)
 }
 } // namespace
 
-int BrainDeformationPanelBlockMatchingTest(int argc, char* argv[])
+int SurfaceAndSimulationPanelBlockMatchingTest(int argc, char* argv[])
 {
   QApplication application(argc, argv);
-  return brainshift::testing::runTest("BrainDeformationPanelBlockMatchingTest", [] {
+  return brainshift::testing::runTest("SurfaceAndSimulationPanelBlockMatchingTest", [] {
     CaseParameters parameters;
     parameters.size = CaseSize::Small;
     const SimulatedCase c = simulateCase(parameters);
     Scene scene;
-    const testing::BrainDeformationTestNodes nodes = testing::addSmallDeformationCase(scene, c);
+    const testing::SurfaceAndSimulationTestNodes nodes = testing::addSmallDeformationCase(scene, c);
     nodes.intraopImage->setRole("intraop");
     auto preopImage = scene.add(ScalarVolumeNode::create("preop image", c.preopImage));
     preopImage->setRole("preop");
@@ -60,13 +60,13 @@ int BrainDeformationPanelBlockMatchingTest(int argc, char* argv[])
 
     Configuration withoutMatching;
     withoutMatching.blockMatching.enabled = false;
-    BS_CHECK(!BrainDeformationPanel(scene, withoutMatching).blockMatchingBox()->isChecked());
-    BrainDeformationPanel panel(scene);
+    BS_CHECK(!SurfaceAndSimulationPanel(scene, withoutMatching).blockMatchingBox()->isChecked());
+    SurfaceAndSimulationPanel panel(scene);
     BS_CHECK(panel.blockMatchingBox()->isChecked());
     BS_CHECK(panel.preopSelector()->currentNodeId().toStdString() == preopImage->id());
     BS_CHECK(panel.intraopLabelsSelector()->setCurrentNodeId(QString::fromStdString(intraopLabels->id())));
-    QSignalSpy finished(&panel, &BrainDeformationPanel::runFinished);
-    QSignalSpy stages(&panel, &BrainDeformationPanel::stageStarted);
+    QSignalSpy finished(&panel, &SurfaceAndSimulationPanel::runFinished);
+    QSignalSpy stages(&panel, &SurfaceAndSimulationPanel::stageStarted);
 
     BS_CHECK(runOnce(panel, finished));
     QStringList seen;

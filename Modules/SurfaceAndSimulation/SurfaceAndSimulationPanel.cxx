@@ -1,4 +1,4 @@
-#include "BrainDeformationPanel.h"
+#include "SurfaceAndSimulationPanel.h"
 
 #include "ActiveSurfaceLogic.h"
 #include "BiomechanicalModel.h"
@@ -19,7 +19,7 @@
 
 namespace brainshift {
 
-BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& configuration, QWidget* parent)
+SurfaceAndSimulationPanel::SurfaceAndSimulationPanel(Scene& scene, const Configuration& configuration, QWidget* parent)
   : QWidget(parent)
   , scene_(scene)
   , configuration_(configuration)
@@ -38,10 +38,10 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& 
   ranks_->setRange(1, 64);
   ranks_->setValue(configuration_.ranks); // as the command line
   ranks_->setToolTip(tr("MPI ranks of the finite element solve"));
-  controls_ = new StageRunControls(tr("Brain deformation"), this);
+  controls_ = new StageRunControls(tr("Surface and simulation"), this);
   boardReader_ = new QTimer(this);
   boardReader_->setInterval(50);
-  connect(boardReader_, &QTimer::timeout, this, &BrainDeformationPanel::readProgressBoard);
+  connect(boardReader_, &QTimer::timeout, this, &SurfaceAndSimulationPanel::readProgressBoard);
 
   auto* form = new QFormLayout;
   form->addRow(tr("Mesh"), mesh_);
@@ -58,19 +58,19 @@ BrainDeformationPanel::BrainDeformationPanel(Scene& scene, const Configuration& 
   column->addStretch(1);
 
   for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_}) selector->setScene(&scene_);
-  connect(controls_, &StageRunControls::runRequested, this, &BrainDeformationPanel::run);
-  connect(controls_, &StageRunControls::runningChanged, this, &BrainDeformationPanel::lockInputs);
-  connect(controls_, &StageRunControls::finished, this, &BrainDeformationPanel::runFinished);
-  connect(controls_, &StageRunControls::discarded, this, &BrainDeformationPanel::discardedRunFinished);
+  connect(controls_, &StageRunControls::runRequested, this, &SurfaceAndSimulationPanel::run);
+  connect(controls_, &StageRunControls::runningChanged, this, &SurfaceAndSimulationPanel::lockInputs);
+  connect(controls_, &StageRunControls::finished, this, &SurfaceAndSimulationPanel::runFinished);
+  connect(controls_, &StageRunControls::discarded, this, &SurfaceAndSimulationPanel::discardedRunFinished);
 }
 
-BrainDeformationPanel::~BrainDeformationPanel()
+SurfaceAndSimulationPanel::~SurfaceAndSimulationPanel()
 {
   // The controls go with this panel and cancel its run: no worker ranks outlive the panel's interest.
   for (NodeSelector* selector : {mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_}) selector->setScene(nullptr);
 }
 
-void BrainDeformationPanel::lockInputs(bool locked)
+void SurfaceAndSimulationPanel::lockInputs(bool locked)
 {
   for (QWidget* input : std::initializer_list<QWidget*>{mesh_, preopLabels_, intraopLabels_, intraop_, transform_, preop_, blockMatching_, ranks_}) {
     input->setEnabled(!locked);
@@ -79,7 +79,7 @@ void BrainDeformationPanel::lockInputs(bool locked)
   else boardReader_->stop();
 }
 
-void BrainDeformationPanel::readProgressBoard()
+void SurfaceAndSimulationPanel::readProgressBoard()
 {
   if (!board_) return;
   std::string stage;
@@ -92,7 +92,7 @@ void BrainDeformationPanel::readProgressBoard()
   if (!stage.empty()) showStage(QString::fromStdString(stage), fraction);
 }
 
-void BrainDeformationPanel::showStage(const QString& stage, double fraction)
+void SurfaceAndSimulationPanel::showStage(const QString& stage, double fraction)
 {
   if (!isRunning()) return; // a late report of a cancelled run
   // The surface stage and the block matching report no fraction: the bar stays. The solves'
@@ -148,7 +148,7 @@ FiniteElementResult solveWithBlockMatches(const DeformationInputs& in, FiniteEle
   job.solverOptions = solverOptionsForRepeatedSolves(job.solverOptions);
   FiniteElementSession session(job, options);
   const FiniteElementResult surfaceOnly = session.solve(job.fixedDisplacements);
-  throwIfCancelled(options.cancel, "brain deformation");
+  throwIfCancelled(options.cancel, "surface and simulation");
   report("block matching", 0.0);
   ImageDrivenSolveInputs inputs;
   inputs.preopImage = in.preopImage.GetPointer();
@@ -174,7 +174,7 @@ DeformationOutcome deformAndSolve(const DeformationInputs& in, CancelFlag cancel
   surfaceParameters.cancel = cancel;
   const ActiveSurfaceResult surface =
     deformBrainSurface(in.mesh, in.preop.GetPointer(), *in.intraopSegmentation, in.image.GetPointer(), *in.rigid, surfaceParameters);
-  throwIfCancelled(cancel, "brain deformation");
+  throwIfCancelled(cancel, "surface and simulation");
   const FiniteElementJob job = finiteElementJobFromModel(in.mesh, surface.surface, in.configuration, "the mesh", "the brain surface");
   FiniteElementRunOptions options;
   options.ranks = in.ranks;
@@ -217,17 +217,17 @@ QString doneMessage(const DeformationOutcome& o)
 {
   QString matches;
   if (o.matched && o.matched->used) {
-    matches = BrainDeformationPanel::tr(" %1 of %2 block matches kept, misfit %3 -> %4 mm;")
+    matches = SurfaceAndSimulationPanel::tr(" %1 of %2 block matches kept, misfit %3 -> %4 mm;")
                 .arg(keptSoftConstraints(o.solved))
                 .arg(o.matched->matching.matches.size())
                 .arg(o.matched->rmsMisfitSurfaceOnlyMm, 0, 'f', 2)
                 .arg(o.solved.rmsMisfitPerRoundMm.empty() ? 0.0 : o.solved.rmsMisfitPerRoundMm.back(), 0, 'f', 2);
   } else if (o.matched) {
-    matches = BrainDeformationPanel::tr(" no block matched (%1 selected): the surface's solve;").arg(o.matched->matching.selected);
+    matches = SurfaceAndSimulationPanel::tr(" no block matched (%1 selected): the surface's solve;").arg(o.matched->matching.selected);
   } else if (o.matchingWithoutVolume) {
-    matches = BrainDeformationPanel::tr(" no block matching (choose the preoperative volume): the surface's solve;");
+    matches = SurfaceAndSimulationPanel::tr(" no block matching (choose the preoperative volume): the surface's solve;");
   }
-  return BrainDeformationPanel::tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm);%5 %6 equations on %7 "
+  return SurfaceAndSimulationPanel::tr("Done in %1 s: %2 surface nodes imposed (up to %3 mm, residual %4 mm);%5 %6 equations on %7 "
                                    "rank(s), %8 iterations, residual %9.")
     .arg(o.seconds, 0, 'f', 1)
     .arg(o.imposed)
@@ -241,7 +241,7 @@ QString doneMessage(const DeformationOutcome& o)
 }
 } // namespace
 
-void BrainDeformationPanel::run()
+void SurfaceAndSimulationPanel::run()
 {
   if (isRunning()) return;
   auto meshNode = std::dynamic_pointer_cast<ModelNode>(mesh_->currentNode());

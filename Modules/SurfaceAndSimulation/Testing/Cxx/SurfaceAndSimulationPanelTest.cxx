@@ -1,11 +1,11 @@
-// The brain deformation panel on the small built-in case (a 5 mm mesh, the truth's rigid
+// The surface and simulation panel on the small built-in case (a 5 mm mesh, the truth's rigid
 // transform and intraoperative labels): Cancel during the surface stage leaves the panel idle at
 // once and nothing in the scene; a run puts the displacement-coloured brain surface under the
 // rigid transform and the displacements on the mesh, with the bar at its end; an empty
 // segmentation is the logic's error in the panel, the scene untouched; a finite element worker
 // that dies mid-run is reported in the panel, the scene untouched, and the panel runs again.
-#include "BrainDeformationPanel.h"
-#include "BrainDeformationTestScene.h"
+#include "SurfaceAndSimulationPanel.h"
+#include "SurfaceAndSimulationTestScene.h"
 #include "BrainShiftTestingSupport.h"
 
 #include <vtkDataArray.h>
@@ -21,29 +21,29 @@
 #include <fstream>
 #include <iostream>
 
-int BrainDeformationPanelTest(int argc, char* argv[])
+int SurfaceAndSimulationPanelTest(int argc, char* argv[])
 {
   QApplication application(argc, argv);
-  return brainshift::testing::runTest("BrainDeformationPanelTest", [] {
+  return brainshift::testing::runTest("SurfaceAndSimulationPanelTest", [] {
     using namespace brainshift;
     CaseParameters parameters;
     parameters.size = CaseSize::Small;
     const SimulatedCase c = simulateCase(parameters);
     Scene scene;
-    const testing::BrainDeformationTestNodes nodes = testing::addSmallDeformationCase(scene, c);
+    const testing::SurfaceAndSimulationTestNodes nodes = testing::addSmallDeformationCase(scene, c);
     const auto& meshNode = nodes.mesh;
     const auto& intraopLabels = nodes.intraopLabels;
     const auto& rigid = nodes.rigid;
-    BrainDeformationPanel panel(scene);
+    SurfaceAndSimulationPanel panel(scene);
     // The ranks (and the surface's and the solve's parameters) are the configuration's.
     BS_CHECK(panel.ranksBox()->value() == Configuration{}.ranks);
     Configuration threeRanks;
     threeRanks.ranks = 3;
-    BS_CHECK(BrainDeformationPanel(scene, threeRanks).ranksBox()->value() == 3);
+    BS_CHECK(SurfaceAndSimulationPanel(scene, threeRanks).ranksBox()->value() == 3);
     BS_CHECK(panel.intraopLabelsSelector()->setCurrentNodeId(QString::fromStdString(intraopLabels->id())));
-    QSignalSpy finished(&panel, &BrainDeformationPanel::runFinished);
-    QSignalSpy discarded(&panel, &BrainDeformationPanel::discardedRunFinished);
-    QSignalSpy stages(&panel, &BrainDeformationPanel::stageStarted);
+    QSignalSpy finished(&panel, &SurfaceAndSimulationPanel::runFinished);
+    QSignalSpy discarded(&panel, &SurfaceAndSimulationPanel::discardedRunFinished);
+    QSignalSpy stages(&panel, &SurfaceAndSimulationPanel::stageStarted);
     const std::size_t nodesBefore = scene.nodes().size();
 
     // Cancelled while the surface is matched: idle at once; the solve never starts.
@@ -86,13 +86,13 @@ int BrainDeformationPanelTest(int argc, char* argv[])
     BS_CHECK(finished.wait(120000));
     BS_CHECK(!finished.last().at(0).toBool());
     std::cout << panel.statusText().toStdString() << '\n';
-    BS_CHECK(panel.statusText().startsWith("Brain deformation failed"));
+    BS_CHECK(panel.statusText().startsWith("Surface and simulation failed"));
     BS_CHECK(surface->mesh() == surfaceBefore && !panel.isRunning());
 
     // A worker that dies (killed, as by the kernel's out-of-memory killer): the panel says so,
     // the host goes on, the scene keeps the last result, and the real worker runs again.
     BS_CHECK(panel.intraopLabelsSelector()->setCurrentNodeId(QString::fromStdString(intraopLabels->id())));
-    const std::filesystem::path dying = testing::temporaryFolder("BrainDeformationPanelTest") / "dying-worker.sh";
+    const std::filesystem::path dying = testing::temporaryFolder("SurfaceAndSimulationPanelTest") / "dying-worker.sh";
     {
       std::ofstream script(dying);
       script << "#!/bin/sh\necho 'preparing' >&2\nkill -9 $$\n";
@@ -103,7 +103,7 @@ int BrainDeformationPanelTest(int argc, char* argv[])
     BS_CHECK(finished.wait(120000));
     BS_CHECK(!finished.last().at(0).toBool());
     std::cout << panel.statusText().toStdString() << '\n';
-    BS_CHECK(panel.statusText().startsWith("Brain deformation failed") && panel.statusText().contains("worker"));
+    BS_CHECK(panel.statusText().startsWith("Surface and simulation failed") && panel.statusText().contains("worker"));
     BS_CHECK(surface->mesh() == surfaceBefore && !panel.isRunning() && panel.runButton()->isEnabled());
     panel.setWorker({});
     panel.run();
