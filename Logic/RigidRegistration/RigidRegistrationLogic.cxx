@@ -2,6 +2,7 @@
 
 #include "Configuration.h"
 
+#include "DeterministicMattesMetric.h"
 #include "DistanceMaps.h"
 #include "IntensityStatistics.h"
 #include "LibraryMessages.h"
@@ -22,7 +23,6 @@
 #include <algorithm>
 #include <functional>
 #include <limits>
-#include <mutex>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -33,7 +33,7 @@ namespace brainshift {
 namespace {
 
 using Transform = itk::VersorRigid3DTransform<double>;
-using Metric = itk::MattesMutualInformationImageToImageMetricv4<ScalarImage, ScalarImage>;
+using Metric = DeterministicMattesMetric<ScalarImage>;
 using PointSet = Metric::FixedSampledPointSetType;
 using Optimizer = itk::RegularStepGradientDescentOptimizerv4<double>;
 using ScalesEstimator = itk::RegistrationParameterScalesFromPhysicalShift<Metric>;
@@ -249,21 +249,8 @@ struct LevelMetric {
   PointSet::Pointer points;
 };
 
-/// A Mattes metric that sums its samples in one fixed order. ITK 5.2's Mattes metric adds the
-/// work units' derivative contributions under a mutex, in the order they finish, so with several
-/// work units the same inputs gave results 3e-4 mm apart. The number of work units is copied
-/// from ITK's global default when the metric is constructed (SetMaximumNumberOfWorkUnits caps
-/// only threads), so the metric is constructed while that default is one.
-Metric::Pointer newDeterministicMetric()
-{
-  static std::mutex constructing;
-  std::lock_guard<std::mutex> lock(constructing);
-  const itk::ThreadIdType previous = itk::MultiThreaderBase::GetGlobalDefaultNumberOfThreads();
-  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(1);
-  Metric::Pointer metric = Metric::New();
-  itk::MultiThreaderBase::SetGlobalDefaultNumberOfThreads(previous);
-  return metric;
-}
+/// A new metric (DeterministicMattesMetric: a fixed split of the samples, summed in a fixed order).
+Metric::Pointer newDeterministicMetric() { return Metric::New(); }
 
 /// The metric of one level. The moving mask limits the samples and, as the metric initializes, the
 /// moving image's histogram range, which it finds by asking the mask about every voxel (0.1 s at 1
@@ -799,6 +786,7 @@ void optimizeOverPyramid(const FixedPyramid& fixed, const PreparedRigidMoving& m
     if (level + 1 == levels) {
       result.metricValue = metric.metric->GetValue();
       result.validSamples = unsigned(metric.metric->GetNumberOfValidPoints());
+      result.metricWorkUnits = unsigned(metric.metric->derivativeWorkUnits());
       const JudgedSamples samples = judgedSamples(*fixed.levels[level], fixed.maxima[level], *moving.levels[level],
                                                   moving.maxima[level], *points, moving.mask, parameters.histogramBins);
       result.normalizedMutualInformation =

@@ -85,6 +85,10 @@ struct RigidRegistrationResult {
   double normalizedMutualInformationGain = 0;
   double rotationDegrees = 0, translationMm = 0; ///< of the result, about the fixed foreground centre
   std::vector<unsigned> iterationsPerLevel;
+  /// The work units the finest level's metric split its samples over: a fixed four (on as many
+  /// threads as there are cores), summed in a fixed order, so the transform does not depend on the
+  /// machine or the threads' timing.
+  unsigned metricWorkUnits = 0;
   std::array<double, 3> winningStartDegrees{}; ///< the multi-start's winning Euler angles
   unsigned startsScored = 0;
   bool trustworthy = true;

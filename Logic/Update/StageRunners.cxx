@@ -71,6 +71,7 @@ void runRigidStage(RunContext& context)
                           {"metric_value", result.metricValue},
                           {"iterations", std::accumulate(result.iterationsPerLevel.begin(), result.iterationsPerLevel.end(), 0u)},
                           {"iterations_per_level", result.iterationsPerLevel},
+                          {"metric_work_units", result.metricWorkUnits},
                           {"normalized_mutual_information", result.normalizedMutualInformation},
                           // What these images share at wrong poses (15 mm, 15 degrees off): the trust
                           // test's baseline, whatever the contrasts; null when no displaced pose overlaps.
