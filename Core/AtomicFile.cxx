@@ -39,8 +39,23 @@ bool completeGzip(const fs::path& path)
   return ::gzclose(in) == Z_OK && complete;
 }
 
+/// Whether a gzip file ends as a whole stream of `contentBytes` bytes does: it starts with gzip's
+/// magic and its last 4 bytes (the trailer's ISIZE, the content's length modulo 2^32, little-endian)
+/// hold that length. A stream cut short ends in compressed data instead, which matches with a
+/// chance of 2^-32.
+bool gzipEndsAfter(const fs::path& path, std::uint64_t contentBytes)
+{
+  std::ifstream in(path, std::ios::binary);
+  unsigned char magic[2] = {0, 0}, trailer[4] = {0, 0, 0, 0};
+  if (!in.read(reinterpret_cast<char*>(magic), 2) || magic[0] != 0x1f || magic[1] != 0x8b) return false;
+  if (!in.seekg(-4, std::ios::end) || !in.read(reinterpret_cast<char*>(trailer), 4)) return false;
+  const std::uint32_t length = std::uint32_t(trailer[0]) | std::uint32_t(trailer[1]) << 8 | std::uint32_t(trailer[2]) << 16 |
+                               std::uint32_t(trailer[3]) << 24;
+  return length == std::uint32_t(contentBytes & 0xffffffffu);
+}
+
 /// MethodError naming `target` unless `written` holds a whole file.
-void verifyWrittenFile(const fs::path& written, const fs::path& target)
+void verifyWrittenFile(const fs::path& written, const fs::path& target, std::optional<std::uint64_t> gzipContentBytes)
 {
   std::error_code ec;
   const auto size = fs::is_regular_file(written, ec) ? fs::file_size(written, ec) : 0;
@@ -50,7 +65,7 @@ void verifyWrittenFile(const fs::path& written, const fs::path& target)
     throw MethodError("cannot write " + target.string() + ": the file reached the file-size limit (" +
                       std::to_string(limit.rlim_cur) + " bytes) and is incomplete");
   }
-  if (endsWith(target.string(), ".gz") && !completeGzip(written)) {
+  if (endsWith(target.string(), ".gz") && !(gzipContentBytes ? gzipEndsAfter(written, *gzipContentBytes) : completeGzip(written))) {
     throw MethodError("cannot write " + target.string() + ": the written file is incomplete (disk full?)");
   }
 }
@@ -79,9 +94,9 @@ AtomicFile::~AtomicFile()
   cleanup::withdrawTemporaryPath(temporary_);
 }
 
-void AtomicFile::commit()
+void AtomicFile::commit(std::optional<std::uint64_t> gzipContentBytes)
 {
-  verifyWrittenFile(temporary_, target_);
+  verifyWrittenFile(temporary_, target_, gzipContentBytes);
   std::error_code ec;
   fs::rename(temporary_, target_, ec);
   if (ec) {

@@ -1,7 +1,9 @@
 #pragma once
 // Outputs are written atomically: to a temporary name in the target's folder, then renamed.
 // A reader never sees a half-written file, and a failure leaves no partial output behind.
+#include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 namespace brainshift {
@@ -18,8 +20,12 @@ public:
   const std::filesystem::path& temporaryPath() const { return temporary_; }
   const std::filesystem::path& targetPath() const { return target_; }
 
-  /// Renames the temporary file onto the target. Throws std::runtime_error if it is missing.
-  void commit();
+  /// Renames the temporary file onto the target, once it is verified: MethodError naming the
+  /// target if it is missing, empty, at the file-size limit, or (a ".gz" target) a gzip stream
+  /// without its end. `gzipContentBytes`: how long the stream's content must be, when the caller
+  /// knows it; the check then reads the stream's trailer (its last 4 bytes hold that length) instead
+  /// of decompressing the whole file (0.05-0.1 s for a 16 MB volume).
+  void commit(std::optional<std::uint64_t> gzipContentBytes = std::nullopt);
 
 private:
   std::filesystem::path target_;

@@ -12,9 +12,11 @@
 namespace brainshift {
 
 /// `compress` off for data zlib cannot shrink much (dense displacement fields of floats: a few
-/// percent smaller for seconds of compression on a 4-million-voxel field).
+/// percent smaller for seconds of compression on a 4-million-voxel field). `gzipContentBytes`: the
+/// written stream's length before compression, when the caller knows it (AtomicFile::commit).
 template <class TWriter>
-void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool compress = true)
+void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool compress = true,
+                     std::optional<std::uint64_t> gzipContentBytes = std::nullopt)
 {
   AtomicFile file(path);
   writer->SetFileName(file.temporaryPath().string());
@@ -27,7 +29,7 @@ void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool co
   } catch (const itk::ExceptionObject& e) {
     throw MethodError("cannot write " + path.string() + ": " + oneLine(e.GetDescription()));
   }
-  file.commit(); // verifies the file first: NIfTI's writer does not notice a full disk
+  file.commit(gzipContentBytes); // verifies the file first: NIfTI's writer does not notice a full disk
 }
 
 } // namespace brainshift

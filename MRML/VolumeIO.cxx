@@ -356,6 +356,8 @@ void checkSliceSpacing(const fs::path& folder, const std::vector<std::string>& f
   }
 }
 
+constexpr std::uint64_t NiftiSingleFileHeaderBytes = 352;
+
 template <class TOutputPixel, class TInputImage>
 void writeAs(const TInputImage* image, const fs::path& path, bool compress = true)
 {
@@ -380,7 +382,14 @@ void writeAs(const TInputImage* image, const fs::path& path, bool compress = tru
     }
   }
   writer->SetInput(converted);
-  writeAtomically(writer.GetPointer(), path, compress);
+  // A compressed single-file NIfTI-1 as ITK writes it: the 348-byte header, the 4-byte extension
+  // flag (no extensions), then the voxels; were it otherwise, every such write would be refused as
+  // incomplete (every test that writes a volume would fail).
+  std::optional<std::uint64_t> contentBytes;
+  if (compress && hasExtension(path, {".nii.gz"})) {
+    contentBytes = NiftiSingleFileHeaderBytes + std::uint64_t(image->GetLargestPossibleRegion().GetNumberOfPixels()) * sizeof(TOutputPixel);
+  }
+  writeAtomically(writer.GetPointer(), path, compress, contentBytes);
 }
 
 } // namespace

@@ -89,6 +89,28 @@ int AtomicFileTest(int, char*[])
       BS_CHECK_THROWS(file.commit(), MethodError, "incomplete");
     }
     BS_CHECK(fs::file_size(image) == committedSize && temporariesIn(folder) == 0);
+    // The same, checked from the stream's trailer when the writer knows the content's length (the
+    // volume writers do): the whole stream passes, a stream cut short or of another length does not.
+    const std::string content = std::string(1 << 16, 'y') + "the end";
+    {
+      AtomicFile file(image);
+      writeGzip(file.temporaryPath(), content);
+      file.commit(content.size());
+    }
+    BS_CHECK(temporariesIn(folder) == 0);
+    const auto trailerCheckedSize = fs::file_size(image);
+    {
+      AtomicFile file(image);
+      writeGzip(file.temporaryPath(), content);
+      fs::resize_file(file.temporaryPath(), fs::file_size(file.temporaryPath()) - 6);
+      BS_CHECK_THROWS(file.commit(content.size()), MethodError, "incomplete");
+    }
+    {
+      AtomicFile file(image);
+      writeGzip(file.temporaryPath(), content);
+      BS_CHECK_THROWS(file.commit(content.size() + 1), MethodError, "incomplete");
+    }
+    BS_CHECK(fs::file_size(image) == trailerCheckedSize && temporariesIn(folder) == 0);
 
     // A folder that cannot be made: a plain file stands where the folder should be.
     std::ofstream(folder / "blocker").close();
