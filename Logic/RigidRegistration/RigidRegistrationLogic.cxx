@@ -249,9 +249,6 @@ struct LevelMetric {
   PointSet::Pointer points;
 };
 
-/// A new metric (DeterministicMattesMetric: a fixed split of the samples, summed in a fixed order).
-Metric::Pointer newDeterministicMetric() { return Metric::New(); }
-
 /// The metric of one level. The moving mask limits the samples and, as the metric initializes, the
 /// moving image's histogram range, which it finds by asking the mask about every voxel (0.1 s at 1
 /// mm); when the mask is known to keep the range whole (`maskKeepsRange`), it is given after that.
@@ -259,7 +256,7 @@ LevelMetric makeMetric(ScalarImage* fixed, ScalarImage* moving, PointSet* points
                        Transform* transform, unsigned bins)
 {
   LevelMetric level;
-  level.metric = newDeterministicMetric();
+  level.metric = Metric::New(); // DeterministicMattesMetric: a fixed split of the samples, summed in a fixed order
   level.points = points;
   level.metric->SetNumberOfHistogramBins(bins);
   level.metric->SetFixedImage(fixed);
