@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -761,29 +762,72 @@ void takeGivenPrototypes(ClassificationWork& w, const std::vector<TissuePrototyp
   }
 }
 
+/// The grid's voxels in the order of the patient's axes: right to left fastest, then anterior to
+/// posterior, then inferior to superior (LPS ascending), whatever the order and sense in which the
+/// scan stores them: the same head acquired sagittally, coronally or flipped gives the same
+/// sequence of physical voxels, so the seeded choice of prototypes picks the same voxels. Empty
+/// when that is the storage order already (an axial grid along LPS), or when the grid's axes are
+/// too oblique to be matched one for one with the patient's (then the storage order is kept).
+std::vector<std::size_t> patientAxisOrder(const ScalarImage& grid)
+{
+  const auto direction = grid.GetDirection();
+  std::array<int, 3> gridAxisOf{-1, -1, -1}; // per patient axis
+  std::array<bool, 3> ascending{};
+  for (int a = 0; a < 3; ++a) {
+    int along = 0;
+    for (int p = 1; p < 3; ++p) {
+      if (std::abs(direction(p, a)) > std::abs(direction(along, a))) along = p;
+    }
+    if (std::abs(direction(along, a)) <= std::sqrt(0.5) + 1e-9 || gridAxisOf[std::size_t(along)] >= 0) return {};
+    gridAxisOf[std::size_t(along)] = a;
+    ascending[std::size_t(along)] = direction(along, a) > 0;
+  }
+  if (gridAxisOf == std::array<int, 3>{0, 1, 2} && ascending[0] && ascending[1] && ascending[2]) return {};
+  const auto size = grid.GetLargestPossibleRegion().GetSize();
+  const std::size_t strides[3] = {1, size[0], size[0] * size[1]};
+  auto step = [&](int patientAxis, std::size_t c) {
+    const int a = gridAxisOf[std::size_t(patientAxis)];
+    const std::size_t n = size[std::size_t(a)];
+    return (ascending[std::size_t(patientAxis)] ? c : n - 1 - c) * strides[a];
+  };
+  std::vector<std::size_t> order;
+  order.reserve(grid.GetLargestPossibleRegion().GetNumberOfPixels());
+  for (std::size_t s = 0; s < size[std::size_t(gridAxisOf[2])]; ++s) {
+    for (std::size_t a = 0; a < size[std::size_t(gridAxisOf[1])]; ++a) {
+      const std::size_t slowPart = step(2, s) + step(1, a);
+      for (std::size_t l = 0; l < size[std::size_t(gridAxisOf[0])]; ++l) order.push_back(slowPart + step(0, l));
+    }
+  }
+  return order;
+}
+
 /// Candidate voxels for the prototypes of tissue slot `t`: inside the aligned tissue by the
 /// erosion (or half its depth for thin tissues); on coarse grids, less deep until there are enough;
 /// for a tissue thinner than the voxels, its most interior voxels, up to 1 mm out (with a warning).
-std::vector<std::size_t> prototypeCandidates(const ClassificationWork& w, std::size_t t, TissueClassificationResult& result)
+/// In `order` (patientAxisOrder; empty: the storage order).
+std::vector<std::size_t> prototypeCandidates(const ClassificationWork& w, std::size_t t, const std::vector<std::size_t>& order,
+                                             TissueClassificationResult& result)
 {
+  auto voxel = [&order](std::size_t n) { return order.empty() ? n : order[n]; };
   std::vector<std::size_t> candidates;
   for (double erosion = std::min(w.P.prototypeErosionMm, 0.5 * w.maps->distances[t].deepestMm);; erosion *= 0.5) {
     if (erosion < 0.25) erosion = 0.0;
     candidates.clear();
-    for (std::size_t i = 0; i < w.N; ++i) {
+    for (std::size_t n = 0; n < w.N; ++n) {
+      const std::size_t i = voxel(n);
       if (w.distance(i, t) <= -erosion && (erosion > 0 || w.distance(i, t) < 0)) candidates.push_back(i);
     }
     if (candidates.size() >= 2 * w.P.prototypesPerClass || erosion == 0.0) break;
   }
   if (candidates.size() < 3 * std::size_t(w.P.k)) {
     candidates.clear();
-    std::vector<std::pair<float, std::size_t>> nearest;
-    for (std::size_t i = 0; i < w.N; ++i) {
-      if (w.distance(i, t) < 1.0f) nearest.emplace_back(w.distance(i, t), i);
+    std::vector<std::pair<float, std::size_t>> nearest; // distance, place in `order`
+    for (std::size_t n = 0; n < w.N; ++n) {
+      if (w.distance(voxel(n), t) < 1.0f) nearest.emplace_back(w.distance(voxel(n), t), n);
     }
     const std::size_t want = std::min<std::size_t>(nearest.size(), 4 * std::size_t(w.P.k));
     std::partial_sort(nearest.begin(), nearest.begin() + std::ptrdiff_t(want), nearest.end());
-    for (std::size_t n = 0; n < want; ++n) candidates.push_back(nearest[n].second);
+    for (std::size_t n = 0; n < want; ++n) candidates.push_back(voxel(nearest[n].second));
     result.warnings.push_back("classify: " + tissueName(w.maps->tissues[t]) + " is thinner than the intraoperative voxels; " +
                               std::to_string(candidates.size()) + " prototypes from its most interior voxels");
   }
@@ -821,7 +865,8 @@ void keepTypicalCandidates(ClassificationWork& w, std::size_t t, std::vector<std
 void choosePrototypes(ClassificationWork& w, TissueClassificationResult& result)
 {
   std::mt19937_64 rng(w.P.seed);
-  for (std::size_t t = 0; t < w.T; ++t) keepTypicalCandidates(w, t, prototypeCandidates(w, t, result), rng);
+  const std::vector<std::size_t> order = patientAxisOrder(w.intraop);
+  for (std::size_t t = 0; t < w.T; ++t) keepTypicalCandidates(w, t, prototypeCandidates(w, t, order, result), rng);
   for (std::size_t p = 0; p < w.prototypeVoxels.size(); ++p) {
     const std::size_t i = w.prototypeVoxels[p];
     itk::Index<3> index{{itk::IndexValueType(i % w.size[0]), itk::IndexValueType((i / w.size[0]) % w.size[1]),
