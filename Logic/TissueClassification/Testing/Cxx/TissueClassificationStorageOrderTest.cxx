@@ -52,14 +52,15 @@ typename TImage::Pointer restored(const TImage& image, const std::array<unsigned
   return out;
 }
 
-/// Voxels whose label differs between `labels` and `reference` at the same physical place.
-std::size_t labelsDifferingAtSamePlace(const LabelImage& labels, const LabelImage& reference)
+/// Voxels whose value differs between `image` and `reference` at the same physical place.
+template <class TImage>
+std::size_t differingAtSamePlace(const TImage& image, const TImage& reference)
 {
   std::size_t differing = 0;
-  itk::ImageRegionConstIteratorWithIndex<LabelImage> it(&labels, labels.GetLargestPossibleRegion());
+  itk::ImageRegionConstIteratorWithIndex<TImage> it(&image, image.GetLargestPossibleRegion());
   for (; !it.IsAtEnd(); ++it) {
     PhysicalPoint x;
-    labels.TransformIndexToPhysicalPoint(it.GetIndex(), x);
+    image.TransformIndexToPhysicalPoint(it.GetIndex(), x);
     itk::Index<3> there;
     BS_CHECK(reference.TransformPhysicalPointToIndex(x, there));
     differing += it.Get() != reference.GetPixel(there);
@@ -94,10 +95,11 @@ int TissueClassificationStorageOrderTest(int, char*[])
                     {"coronal, slices from superior", {0, 2, 1}, {false, true, false}}};
     for (const auto& storage : storages) {
       const ScalarImage::Pointer scan = restored(axial, storage.axes, storage.reversed);
-      // The re-stored scan is the same image: every voxel in its physical place.
+      // Stored otherwise (another direction matrix), yet the same image: every voxel's value in its physical place.
       BS_CHECK(scan->GetDirection() != axial.GetDirection());
+      BS_CHECK_MSG(differingAtSamePlace(*scan, axial) == 0, storage.name << ": not the same image");
       const TissueClassificationResult result = classifyTissues(*scan, *c.simulated.preopLabels, *c.rigid, std::nullopt, parameters);
-      const std::size_t differing = labelsDifferingAtSamePlace(*result.labels, *reference.labels);
+      const std::size_t differing = differingAtSamePlace(*result.labels, *reference.labels);
       std::cout << storage.name << ": " << differing << " of " << result.voxels << " voxels labelled otherwise, "
                 << result.prototypes.size() << " prototypes\n";
       BS_CHECK_MSG(differing == 0, storage.name << ": " << differing << " voxels");
