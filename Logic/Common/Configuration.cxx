@@ -147,7 +147,8 @@ void readClassification(const json& c, const std::string& file, Configuration& c
 {
   if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
   requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
-                      "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look", "tumour_second_look"},
+                      "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look", "tumour_second_look",
+                       "prototypes_per_tissue", "seed"},
                    file + ": classification");
   if (c.contains("tumour_resected")) {
     if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");
@@ -170,6 +171,10 @@ void readClassification(const json& c, const std::string& file, Configuration& c
     configuration.classificationRefinementToleranceMm = number(c["refinement_tolerance_mm"], file + ": classification.refinement_tolerance_mm");
   }
   if (c.contains("k")) configuration.classificationK = wholeNumber(c["k"], 1, file + ": classification.k");
+  if (c.contains("prototypes_per_tissue")) {
+    configuration.classificationPrototypesPerTissue = wholeNumber(c["prototypes_per_tissue"], 1, file + ": classification.prototypes_per_tissue");
+  }
+  if (c.contains("seed")) configuration.classificationSeed = wholeNumber(c["seed"], 0, file + ": classification.seed");
   if (c.contains("saturation_mm")) configuration.classificationSaturationMm = number(c["saturation_mm"], file + ": classification.saturation_mm");
   readFlags(c, {{"bias_correction", &configuration.classificationBiasCorrection},
                 {"fluid_thickness_in_aligned_brain", &configuration.classificationFluidThicknessInAlignedBrain},
@@ -373,6 +378,10 @@ void validateClassificationSettings(const Configuration& c, const std::string& s
 {
   if (c.classificationK < 1 || c.classificationK > 101) {
     throw InputError(source + ": classification k " + std::to_string(c.classificationK) + " is outside 1 to 101");
+  }
+  if (c.classificationPrototypesPerTissue < 1 || c.classificationPrototypesPerTissue > 20000) {
+    throw InputError(source + ": classification prototypes_per_tissue " + std::to_string(c.classificationPrototypesPerTissue) +
+                     " is outside 1 to 20000");
   }
   if (c.classificationTumourResected != "auto" && c.classificationTumourResected != "yes" && c.classificationTumourResected != "no") {
     throw InputError(source + ": classification tumour_resected '" + c.classificationTumourResected + "' is not one of auto, yes, no");

@@ -45,6 +45,11 @@ struct Configuration {
   unsigned classificationK = 7;
   double classificationSaturationMm = 10.0;
   bool classificationBiasCorrection = false;
+  /// The prototypes: how many a tissue, and the seed of their choice among the candidates (the
+  /// same seed, the same prototypes and labels; another seed is another draw of the same rule, the
+  /// way to measure what one draw is worth: README, "Tissue classification").
+  unsigned classificationPrototypesPerTissue = 150;
+  unsigned classificationSeed = 2000;
   /// Thick fluid in the brain (a gap, a cavity) measured over the aligned preoperative brain too.
   bool classificationFluidThicknessInAlignedBrain = true;
   /// A tumour in place: its k-NN voxels that look more like fluid than its own look may be fluid.

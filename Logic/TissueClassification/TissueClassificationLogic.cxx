@@ -504,7 +504,8 @@ TissueClassificationParameters classificationParametersFrom(const Configuration&
   parameters.k = configuration.classificationK;
   parameters.saturationMm = configuration.classificationSaturationMm;
   parameters.biasCorrection = configuration.classificationBiasCorrection;
-  parameters.prototypesPerClass = std::max(parameters.prototypesPerClass, parameters.k);
+  parameters.prototypesPerClass = std::max(configuration.classificationPrototypesPerTissue, parameters.k);
+  parameters.seed = configuration.classificationSeed;
   parameters.tumourResection = tumourResectionFromString(configuration.classificationTumourResected);
   parameters.fluidThicknessInAlignedBrain = configuration.classificationFluidThicknessInAlignedBrain;
   parameters.tumourFluidByLook = configuration.classificationTumourFluidByLook;

@@ -29,6 +29,9 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(shipped.meshCoarseningLevels == defaults.meshCoarseningLevels);
     BS_CHECK(shipped.classificationFluidThicknessInAlignedBrain && defaults.classificationFluidThicknessInAlignedBrain);
     BS_CHECK(shipped.classificationTumourFluidByLook && defaults.classificationTumourFluidByLook);
+    BS_CHECK(shipped.classificationPrototypesPerTissue == defaults.classificationPrototypesPerTissue &&
+             defaults.classificationPrototypesPerTissue == 150);
+    BS_CHECK(shipped.classificationSeed == defaults.classificationSeed && defaults.classificationSeed == 2000);
     // Refinement passes "auto" (empty: chosen from the scan's contrast) in both.
     BS_CHECK(!shipped.classificationRefinementPasses && !defaults.classificationRefinementPasses);
     BS_CHECK(shipped.surfaceResidualCorrection && defaults.surfaceResidualCorrection);
@@ -45,7 +48,7 @@ int ConfigurationTest(int, char*[])
                                       "solver": {"options": "-ksp_type gmres -pc_type bjacobi"},
                                       "rigid": {"sampling": 0.5, "levels": 2},
                                       "classification": {"fluid_thickness_in_aligned_brain": false, "tumour_fluid_by_look": false,
-                                                         "refinement_passes": 2},
+                                                         "refinement_passes": 2, "prototypes_per_tissue": 600, "seed": 7},
                                       "surface": {"residual_correction": false},
                                       "uncertainty": {"growth_per_mm": 0, "displacement_share": 0.25}})");
     const Configuration c = Configuration::load(file);
@@ -63,6 +66,7 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(c.rigidLevels == 2);
     BS_CHECK(!c.classificationFluidThicknessInAlignedBrain && !c.classificationTumourFluidByLook);
     BS_CHECK(c.classificationRefinementPasses && *c.classificationRefinementPasses == 2);
+    BS_CHECK(c.classificationPrototypesPerTissue == 600 && c.classificationSeed == 7);
     BS_CHECK(!c.surfaceResidualCorrection && c.surfaceMatchAlongSinkingDirection); // the rest of "surface" keeps its defaults
     BS_CHECK_NEAR(c.uncertainty.growthPerMm, 0.0, 0);
     BS_CHECK_NEAR(c.uncertainty.displacementShare, 0.25, 0);
@@ -93,6 +97,8 @@ int ConfigurationTest(int, char*[])
     refused(R"({"classification": {"refinement_passes": 11}})", "refinement passes 11 is outside 0 to 10");
     refused(R"({"classification": {"refinement_passes": 4294967296}})", "classification.refinement_passes must be");
     refused(R"({"classification": {"k": 0}})", "classification.k must be a whole number >= 1");
+    refused(R"({"classification": {"seed": -1}})", "classification.seed must be a whole number >= 0");
+    refused(R"({"classification": {"prototypes_per_tissue": 50000}})", "prototypes_per_tissue 50000 is outside 1 to 20000");
     refused(R"({"rigid": {"levels": 2.5}})", "rigid.levels must be a whole number >= 1");
     refused(R"({"surface": {"max_iterations": -3}})", "surface.max_iterations must be a whole number >= 1");
     refused(R"({"surface": {"residual_correction": "yes"}})", "surface.residual_correction must be true or false");

@@ -6,6 +6,7 @@
 // 0.50 / 0.88 mm (sagittal; the axial run's rigid transform given to each), while the later stages
 // given the same labels gave the same result to the last digit (README, "Storage order").
 #include "BrainShiftTestingSupport.h"
+#include "Configuration.h"
 #include "TissueClassificationTestSupport.h"
 
 #include <array>
@@ -106,5 +107,19 @@ int TissueClassificationStorageOrderTest(int, char*[])
       BS_CHECK_MSG(prototypePlaces(result) == prototypePlaces(reference), storage.name << ": other prototypes");
       BS_CHECK(result.tumourResected == reference.tumourResected);
     }
+    // The configuration's seed reaches the choice: another seed is another draw of the same rule
+    // (other prototypes, nearly the same labels); a count below k is raised to k.
+    Configuration configuration;
+    configuration.classificationSeed = 2001;
+    configuration.classificationPrototypesPerTissue = 3;
+    const TissueClassificationParameters drawn = classificationParametersFrom(configuration);
+    BS_CHECK(drawn.seed == 2001 && drawn.prototypesPerClass == drawn.k);
+    TissueClassificationParameters anotherDraw;
+    anotherDraw.seed = configuration.classificationSeed;
+    const TissueClassificationResult other = classifyTissues(axial, *c.simulated.preopLabels, *c.rigid, std::nullopt, anotherDraw);
+    const std::size_t differing = differingAtSamePlace(*other.labels, *reference.labels);
+    std::cout << "seed 2001: " << differing << " voxels labelled otherwise than with seed 2000\n";
+    BS_CHECK(prototypePlaces(other) != prototypePlaces(reference));
+    BS_CHECK_MSG(differing > 0 && differing < other.voxels / 20, differing << " of " << other.voxels);
   });
 }
