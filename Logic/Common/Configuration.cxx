@@ -148,7 +148,7 @@ void readClassification(const json& c, const std::string& file, Configuration& c
   if (!c.is_object()) throw InputError(file + ": \"classification\" must be an object");
   requireKnownKeys(c, {"k", "saturation_mm", "bias_correction", "tumour_resected", "refinement_passes", "refinement_tolerance_mm",
                       "refinement_reach_mm", "fluid_thickness_in_aligned_brain", "tumour_fluid_by_look", "tumour_second_look",
-                       "prototypes_per_tissue", "seed"},
+                      "prototypes_per_tissue", "seed"},
                    file + ": classification");
   if (c.contains("tumour_resected")) {
     if (!c["tumour_resected"].is_string()) throw InputError(file + ": classification.tumour_resected must be \"auto\", \"yes\" or \"no\"");

@@ -285,6 +285,7 @@ void runClassifyStage(RunContext& context)
                                          {"prototypes_given", prototypes.has_value()},
                                          {"prototypes_from", prototypesFile ? prototypesFile->string() : std::string()},
                                          {"k", parameters.k},
+                                         {"seed", parameters.seed},
                                          {"tumour_resected", result.tumourResected},
                                          {"tumour_evidence", tumourEvidence},
                                          {"contrast", scanContrastJson(result.contrast, result.intensityScale)},

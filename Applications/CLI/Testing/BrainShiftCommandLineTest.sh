@@ -537,6 +537,8 @@ ClassifyStage)
   for key in wall_seconds voxels prototypes knn_seconds tumour_resected; do
     json_value "$out/report.json" "['stages']['classify']['$key']" >/dev/null || fail "report.json lacks classify.$key"
   done
+  # The draw of the prototypes is recorded (classification.seed; another seed, another draw).
+  [ "$(json_value "$out/report.json" "['stages']['classify']['seed']")" = 2000 ] || fail "report.json lacks the prototypes' seed"
   [ "$(json_value "$out/report.json" "['stages']['rigid']['trustworthy']")" = "True" ] || fail "the rigid entry was lost"
   # The next scan reuses the recorded prototypes: on the same scan, the same labels.
   mkdir -p "$out/again" && cp "$out/rigid_intraop_to_preop.tfm" "$out/again/"
