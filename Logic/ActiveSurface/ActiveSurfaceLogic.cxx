@@ -919,6 +919,8 @@ void ActiveSurfaceParameters::validate() const
   require(std::isfinite(boundaryOffsetWarningVoxels) && boundaryOffsetWarningVoxels >= 0,
           "the boundary offset's warning must be >= 0 voxels");
   require(boundaryOffsetMinimumShare >= 0 && boundaryOffsetMinimumShare <= 1, "the boundary offset's share must be in [0, 1]");
+  require(std::isfinite(restBandMm) && restBandMm >= 0 && restBandMm <= 5, "the rest band must be in [0, 5] mm");
+  require(restBandSmoothingPasses <= 100, "the rest band's smoothing passes must be at most 100");
   require(!brainLabels.empty(), "no brain labels");
 }
 
@@ -1348,11 +1350,35 @@ void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& pre
   result.warnings.push_back(w.str());
 }
 
+/// The rest band (ActiveSurfaceParameters::restBandMm): each matched node's displacement u becomes
+/// s u, s = clamp((|m| - band) / band, 0, 1) with m the surface's local mean move at the node (u
+/// filtered by the membrane `restBandSmoothingPasses` times): held at rest below the band, all of it
+/// beyond twice the band, a continuous ramp between (a step would tear the imposed field between
+/// neighbours). The local mean, not the node's own move: the segmentation's boundary noise changes
+/// from node to node and averages out, a real motion does not, so the rim of a region that moved
+/// keeps its move. Counts the nodes held and those scaled.
+void holdAtRest(Eigen::MatrixXd& u, const std::vector<unsigned char>& freeReason, const MembraneStep& membrane,
+                const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+{
+  if (!(p.restBandMm > 0)) return;
+  Eigen::MatrixXd local = u;
+  for (unsigned pass = 0; pass < p.restBandSmoothingPasses; ++pass) local = membrane.solve(local);
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
+    if (freeReason[i] != Matched) continue;
+    const Eigen::Index row = Eigen::Index(i);
+    const double scale = std::clamp((local.row(row).norm() - p.restBandMm) / p.restBandMm, 0.0, 1.0);
+    if (scale >= 1.0) continue;
+    u.row(row) *= scale;
+    ++(scale > 0 ? result.restScaledNodes : result.restHeldNodes);
+  }
+}
+
 /// Each node's displacement from its preoperative boundary point: snapped onto the target boundary
-/// where asked, zero where held outside the image; the surface must not have folded.
+/// where asked, zero where held outside the image, held or scaled down within the rest band; the
+/// surface must not have folded.
 Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
-                                     const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
-                                     ActiveSurfaceResult& result)
+                                     const MembraneStep& membrane, const std::vector<unsigned char>& freeReason,
+                                     const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
 {
   FitOutcome& fit = fitted.fit;
   if (p.snapToBoundary) {
@@ -1360,11 +1386,10 @@ Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& 
   }
   Eigen::MatrixXd u = fit.positions - preopBoundary;
   for (std::size_t i = 0; i < freeReason.size(); ++i) {
-    if (freeReason[i] == HeldOutsideImage) {
-      u.row(Eigen::Index(i)).setZero();
-      fit.positions.row(Eigen::Index(i)) = preopBoundary.row(Eigen::Index(i));
-    }
+    if (freeReason[i] == HeldOutsideImage) u.row(Eigen::Index(i)).setZero();
   }
+  holdAtRest(u, freeReason, membrane, p, result);
+  fit.positions = preopBoundary + u;
   requireUnfolded(preopBoundary, fit.positions, topology, result);
   return u;
 }
@@ -1443,6 +1468,8 @@ ActiveSurfaceParameters activeSurfaceParametersFrom(const Configuration& configu
   parameters.snapToBoundary = configuration.surfaceSnapToBoundary;
   parameters.residualCorrection = configuration.surfaceResidualCorrection;
   parameters.holdOutsideFieldOfView = configuration.surfaceHoldOutsideFieldOfView;
+  parameters.restBandMm = configuration.surfaceRestBandMm;
+  parameters.restBandSmoothingPasses = configuration.surfaceRestBandSmoothingPasses;
   return parameters;
 }
 
@@ -1562,7 +1589,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
     const double warningMm = std::max(p.boundaryOffsetWarningMm, p.boundaryOffsetWarningVoxels * voxelMm);
     measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, warningMm, p, result);
   }
-  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, freeReason, p, result);
+  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, membrane, freeReason, p, result);
   result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;
 }

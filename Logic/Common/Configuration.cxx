@@ -195,7 +195,9 @@ void readSurface(const json& c, const std::string& file, Configuration& configur
 {
   if (!c.is_object()) throw InputError(file + ": \"surface\" must be an object");
   requireKnownKeys(c, {"membrane_weight", "bending_weight", "image_weight", "max_iterations", "match_along_sinking_direction",
-                       "snap_to_boundary", "residual_correction", "hold_outside_field_of_view"}, file + ": surface");
+                       "snap_to_boundary", "residual_correction", "hold_outside_field_of_view", "rest_band_mm",
+                       "rest_band_smoothing_passes"},
+                   file + ": surface");
   readFlags(c, {{"match_along_sinking_direction", &configuration.surfaceMatchAlongSinkingDirection},
                 {"snap_to_boundary", &configuration.surfaceSnapToBoundary},
                 {"residual_correction", &configuration.surfaceResidualCorrection},
@@ -204,6 +206,10 @@ void readSurface(const json& c, const std::string& file, Configuration& configur
   if (c.contains("membrane_weight")) configuration.surfaceMembraneWeight = number(c["membrane_weight"], file + ": surface.membrane_weight");
   if (c.contains("bending_weight")) configuration.surfaceBendingWeight = number(c["bending_weight"], file + ": surface.bending_weight");
   if (c.contains("image_weight")) configuration.surfaceImageWeight = number(c["image_weight"], file + ": surface.image_weight");
+  if (c.contains("rest_band_mm")) configuration.surfaceRestBandMm = number(c["rest_band_mm"], file + ": surface.rest_band_mm");
+  if (c.contains("rest_band_smoothing_passes")) {
+    configuration.surfaceRestBandSmoothingPasses = wholeNumber(c["rest_band_smoothing_passes"], 0, file + ": surface.rest_band_smoothing_passes");
+  }
   if (c.contains("max_iterations")) {
     configuration.surfaceMaximumIterations = wholeNumber(c["max_iterations"], 1, file + ": surface.max_iterations");
   }
@@ -406,6 +412,13 @@ void validateClassificationSettings(const Configuration& c, const std::string& s
 
 void validateSurfaceSettings(const Configuration& c, const std::string& source)
 {
+  if (!std::isfinite(c.surfaceRestBandMm) || c.surfaceRestBandMm < 0 || c.surfaceRestBandMm > 5) {
+    throw InputError(source + ": surface rest_band_mm " + std::to_string(c.surfaceRestBandMm) + " mm is outside 0 (off) to 5 mm");
+  }
+  if (c.surfaceRestBandSmoothingPasses > 100) {
+    throw InputError(source + ": surface rest_band_smoothing_passes " + std::to_string(c.surfaceRestBandSmoothingPasses) +
+                     " is outside 0 to 100");
+  }
   if (!std::isfinite(c.surfaceMembraneWeight) || c.surfaceMembraneWeight < 0 || c.surfaceMembraneWeight > 1000 ||
       !std::isfinite(c.surfaceBendingWeight) || c.surfaceBendingWeight < 0 || c.surfaceBendingWeight > 1000) {
     throw InputError(source + ": surface membrane and bending weights must be within 0 to 1000");

@@ -88,6 +88,11 @@ struct Configuration {
   bool surfaceResidualCorrection = true;
   /// Surface nodes outside the intraoperative field of view: held at rest (true) or left free.
   bool surfaceHoldOutsideFieldOfView = true;
+  /// Imposed surface nodes whose surface moved less than this (mm) about them held at rest, ramped
+  /// up to all of their move at twice it; the local move is the displacement filtered by the membrane
+  /// this many times (ActiveSurfaceParameters::restBandMm, restBandSmoothingPasses; 0 mm: off).
+  double surfaceRestBandMm = 1.0;
+  unsigned surfaceRestBandSmoothingPasses = 4;
   /// Block matching inside the brain (Logic/BlockMatching) and its matches as soft constraints of
   /// the solve, rejected in rounds (FiniteElementJob.h): "block_matching" in the file.
   struct BlockMatching {

@@ -360,12 +360,15 @@ OffsetCase sinkSeenWithOffset(double bias, const ActiveSurfaceParameters& parame
 }
 
 /// A segmentation that puts the whole boundary 1 mm inside: the offset is measured (the median
-/// normal move, within 0.3 mm) and a warning says the update carries it into the brain; the same
+/// normal move, within 0.3 mm) and a warning says the update carries it into the brain (the rest
+/// band off: it would hold part of it, restBandHoldsTheStillSurface); the same
 /// sink segmented without an offset measures none (within 0.3 mm) and warns of nothing.
 void segmentationOffsetIsReported()
 {
-  const OffsetCase offset = sinkSeenWithOffset(1.0, ActiveSurfaceParameters{});
-  const OffsetCase none = sinkSeenWithOffset(0.0, ActiveSurfaceParameters{});
+  ActiveSurfaceParameters unbanded; // what the surface carries, before the rest band holds any of it
+  unbanded.restBandMm = 0;
+  const OffsetCase offset = sinkSeenWithOffset(1.0, unbanded);
+  const OffsetCase none = sinkSeenWithOffset(0.0, unbanded);
   std::cout << "segmentation offset 1 mm: measured " << offset.result.boundaryOffsetMm << " mm over " << offset.result.boundaryOffsetNodes
             << " nodes (far from the sink the surface moved " << offset.farMoveMm << " mm); none: " << none.result.boundaryOffsetMm
             << " mm (" << none.farMoveMm << " mm)\n";
@@ -382,6 +385,44 @@ void segmentationOffsetIsReported()
   BS_CHECK(none.result.boundaryOffsetNodes > none.result.surfaceNodes / 2); // measured, and found none
   BS_CHECK_NEAR(none.result.boundaryOffsetMm, 0.0, 0.3);
   BS_CHECK(!warnsOfOffset(none.result));
+}
+
+/// The rest band: the same sink segmented 0.6 mm inside everywhere. Without the band the surface
+/// far from the sink carries the segmentation's offset (about -0.6 mm); with a band of 1 mm it is
+/// held at rest there (less than a fifth of it left: nodes the membrane also moved sideways are
+/// only scaled down), while the sink's bottom (6 mm, beyond twice the band) moves
+/// exactly as without it; the nodes held and scaled are counted, nothing folds, and the
+/// configuration's default is the parameters'. A band out of range is refused.
+void restBandHoldsTheStillSurface()
+{
+  ActiveSurfaceParameters off, banded;
+  off.restBandMm = 0;
+  banded.restBandMm = 1.0;
+  banded.restBandSmoothingPasses = 4;
+  const OffsetCase plain = sinkSeenWithOffset(0.6, off);
+  const OffsetCase held = sinkSeenWithOffset(0.6, banded);
+  std::cout << "rest band 1 mm: far from the sink " << plain.farMoveMm << " -> " << held.farMoveMm << " mm, sink's bottom "
+            << plain.sinkMoveMm << " -> " << held.sinkMoveMm << " mm; " << held.result.restHeldNodes << " nodes held, "
+            << held.result.restScaledNodes << " scaled of " << held.result.imposedNodes << " imposed\n";
+  BS_CHECK_NEAR(plain.farMoveMm, -0.6, 0.25);
+  BS_CHECK_MSG(std::abs(held.farMoveMm) < 0.2 * std::abs(plain.farMoveMm), held.farMoveMm);
+  BS_CHECK_MSG(plain.sinkMoveMm < -5.0, plain.sinkMoveMm);
+  BS_CHECK_NEAR(held.sinkMoveMm, plain.sinkMoveMm, 1e-9);
+  BS_CHECK(plain.result.restHeldNodes == 0 && plain.result.restScaledNodes == 0);
+  BS_CHECK(held.result.restHeldNodes > held.result.imposedNodes / 4 && held.result.restScaledNodes > 0);
+  BS_CHECK(held.result.restHeldNodes + held.result.restScaledNodes > held.result.imposedNodes / 2);
+  BS_CHECK(held.result.restHeldNodes + held.result.restScaledNodes < held.result.imposedNodes);
+  BS_CHECK(held.result.flippedTriangles == 0 && held.result.imposedNodes == plain.result.imposedNodes);
+  BS_CHECK(activeSurfaceParametersFrom(Configuration{}).restBandMm == ActiveSurfaceParameters{}.restBandMm);
+  BS_CHECK(activeSurfaceParametersFrom(Configuration{}).restBandSmoothingPasses == ActiveSurfaceParameters{}.restBandSmoothingPasses);
+  ActiveSurfaceParameters absurd;
+  absurd.restBandMm = -1.0;
+  BS_CHECK_THROWS(absurd.validate(), InputError, "rest band");
+  absurd.restBandMm = std::nan("");
+  BS_CHECK_THROWS(absurd.validate(), InputError, "rest band");
+  absurd.restBandMm = 1.0;
+  absurd.restBandSmoothingPasses = 1000;
+  BS_CHECK_THROWS(absurd.validate(), InputError, "smoothing passes");
 }
 
 /// An axial slab through the sphere's middle (`slices` of 2.5 mm) as the intraoperative grid.
@@ -561,6 +602,7 @@ int ActiveSurfaceTest(int, char*[])
     resectedTumourIsFree();
     deepSinkReachesItsBottom();
     segmentationOffsetIsReported();
+    restBandHoldsTheStillSurface();
     slabFieldOfView();
     badInput();
     smallCaseAgainstTruth();

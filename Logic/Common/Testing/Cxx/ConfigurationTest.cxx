@@ -36,6 +36,8 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(!shipped.classificationRefinementPasses && !defaults.classificationRefinementPasses);
     BS_CHECK(shipped.surfaceResidualCorrection && defaults.surfaceResidualCorrection);
     BS_CHECK(!shipped.surfaceSnapToBoundary && !defaults.surfaceSnapToBoundary);
+    BS_CHECK_NEAR(shipped.surfaceRestBandMm, defaults.surfaceRestBandMm, 0);
+    BS_CHECK(shipped.surfaceRestBandSmoothingPasses == defaults.surfaceRestBandSmoothingPasses);
     BS_CHECK_NEAR(shipped.uncertainty.floorMm, defaults.uncertainty.floorMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.growthPerMm, defaults.uncertainty.growthPerMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.misfitReachMm, defaults.uncertainty.misfitReachMm, 0);
@@ -49,7 +51,7 @@ int ConfigurationTest(int, char*[])
                                       "rigid": {"sampling": 0.5, "levels": 2},
                                       "classification": {"fluid_thickness_in_aligned_brain": false, "tumour_fluid_by_look": false,
                                                          "refinement_passes": 2, "prototypes_per_tissue": 600, "seed": 7},
-                                      "surface": {"residual_correction": false},
+                                      "surface": {"residual_correction": false, "rest_band_mm": 1.5, "rest_band_smoothing_passes": 0},
                                       "uncertainty": {"growth_per_mm": 0, "displacement_share": 0.25}})");
     const Configuration c = Configuration::load(file);
     BS_CHECK_NEAR(c.materials.at(4).youngsModulusPa, 20000.0, 0);
@@ -68,6 +70,8 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(c.classificationRefinementPasses && *c.classificationRefinementPasses == 2);
     BS_CHECK(c.classificationPrototypesPerTissue == 600 && c.classificationSeed == 7);
     BS_CHECK(!c.surfaceResidualCorrection && c.surfaceMatchAlongSinkingDirection); // the rest of "surface" keeps its defaults
+    BS_CHECK_NEAR(c.surfaceRestBandMm, 1.5, 0);
+    BS_CHECK(c.surfaceRestBandSmoothingPasses == 0);
     BS_CHECK_NEAR(c.uncertainty.growthPerMm, 0.0, 0);
     BS_CHECK_NEAR(c.uncertainty.displacementShare, 0.25, 0);
     BS_CHECK_NEAR(c.uncertainty.floorMm, defaults.uncertainty.floorMm, 0); // not in the file: the default
@@ -102,6 +106,9 @@ int ConfigurationTest(int, char*[])
     refused(R"({"rigid": {"levels": 2.5}})", "rigid.levels must be a whole number >= 1");
     refused(R"({"surface": {"max_iterations": -3}})", "surface.max_iterations must be a whole number >= 1");
     refused(R"({"surface": {"residual_correction": "yes"}})", "surface.residual_correction must be true or false");
+    refused(R"({"surface": {"rest_band_mm": 6}})", "surface rest_band_mm 6.000000 mm is outside 0 (off) to 5 mm");
+    refused(R"({"surface": {"rest_band_mm": "wide"}})", "surface.rest_band_mm: a number is expected");
+    refused(R"({"surface": {"rest_band_smoothing_passes": 101}})", "surface rest_band_smoothing_passes 101 is outside 0 to 100");
     refused(R"({"uncertainty": {"floor_mm": -0.1}})", "uncertainty.floor_mm -0.1 is outside 0 to 100");
     refused(R"({"uncertainty": {"misfit_reach_mm": 0}})", "uncertainty.misfit_reach_mm must be above 0");
     refused(R"({"uncertainty": {"share": 0.2}})", "unknown key \"share\"");
