@@ -498,6 +498,26 @@ private:
   bool factored_ = false, ok_ = false;
 };
 
+/// The membrane's low-pass filter F = (I + alpha K + beta K^2)^-1: the iterations' own step when
+/// their tau is 1 (the default), else one factorised with tau = 1. The residual correction and the
+/// rest band filter with it.
+class MembraneFilter {
+public:
+  MembraneFilter(const Eigen::SparseMatrix<double>& laplacian, const MembraneStep& iterationStep, const ActiveSurfaceParameters& p)
+    : iterationStep_(iterationStep)
+  {
+    if (p.timeStep == 1.0) return;
+    ActiveSurfaceParameters unit = p;
+    unit.timeStep = 1.0;
+    own_.emplace(laplacian, unit);
+  }
+  const MembraneStep& step() const { return own_ ? *own_ : iterationStep_; }
+
+private:
+  const MembraneStep& iterationStep_;
+  std::optional<MembraneStep> own_;
+};
+
 /// One way the brain's surroundings differ from it in this scan: darker (insideSign +1: CSF and
 /// bone in T1, air and bone in every contrast) or brighter (-1: CSF and fluid in T2).
 struct OutsideSide {
@@ -1255,19 +1275,12 @@ void requireUnfolded(const Eigen::MatrixXd& preopBoundary, const Eigen::MatrixXd
 /// v + F (t - v) = (2F - F^2) t) leaves a smooth motion's loss at (1 - F)^2 instead of 1 - F,
 /// while what F damps strongly (the boundary's voxel-scale roughness) stays damped.
 /// The residual is each matched node's final pull (free nodes: none); `unitStep` is the membrane
-/// with tau = 1 (F itself). Refreshes the matched nodes' residuals to the segmentation's boundary
-/// (not where the image's edge placed the node). Sets the correction's mean and largest length.
-void correctMembraneResidual(FitOutcome& fit, const Eigen::SparseMatrix<double>& laplacian, const MembraneStep& membrane,
-                             const IntraopTarget& target, const std::vector<unsigned char>& freeReason,
-                             const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
+/// with tau = 1 (F itself, MembraneFilter). Refreshes the matched nodes' residuals to the
+/// segmentation's boundary (not where the image's edge placed the node). Sets the correction's mean and largest length.
+void correctMembraneResidual(FitOutcome& fit, const MembraneStep& unitStep, const IntraopTarget& target,
+                             const std::vector<unsigned char>& freeReason, const ActiveSurfaceParameters& p,
+                             ActiveSurfaceResult& result)
 {
-  std::optional<MembraneStep> ownUnitStep; // F needs tau = 1: the iterations' own step unless told otherwise
-  if (p.timeStep != 1.0) {
-    ActiveSurfaceParameters unit = p;
-    unit.timeStep = 1.0;
-    ownUnitStep.emplace(laplacian, unit);
-  }
-  const MembraneStep& unitStep = ownUnitStep ? *ownUnitStep : membrane;
   const Eigen::Index n = fit.positions.rows();
   Eigen::MatrixXd residual = Eigen::MatrixXd::Zero(n, 3);
   for (Eigen::Index i = 0; i < n; ++i) {
@@ -1320,8 +1333,8 @@ Eigen::MatrixXd outwardNormals(const Eigen::MatrixXd& positions, const SurfaceTo
 /// image's edge) the median move along the outward normal is then what the whole boundary shares:
 /// where this scan's classification puts the brain's edge against where the preoperative labels put
 /// it (T2's bright fluid against the cortex: 0.85-1.09 mm inside on the scenarios), or a change of the
-/// whole brain. The solve carries it into the brain beneath the whole surface (README, "Active
-/// surface"); beyond `warningMm` a warning says so. It is not taken off: where the
+/// whole brain. The solve carries it into the brain beneath the whole surface, less what the rest
+/// band holds (holdAtRest; README, "Active surface"); beyond `warningMm` a warning says so. It is not taken off: where the
 /// brain moved the segmentation's error can be the other way (T2's gap fluid called brain), and a
 /// uniform correction doubled the boundary's error there. Not measured when those nodes cover less
 /// than `boundaryOffsetMinimumShare` of the surface (a slab may see mostly the region that moved).
@@ -1346,23 +1359,24 @@ void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& pre
     << std::abs(result.boundaryOffsetMm) << " mm " << (result.boundaryOffsetMm < 0 ? "inside" : "outside")
     << " the preoperative one (median of " << normalMoves.size()
     << " surface nodes): this scan's classification draws the brain's edge elsewhere than the preoperative labels, or the "
-       "whole brain changed; the update moves the brain beneath its whole surface by about as much (check the classification)";
+       "whole brain changed; the update moves the brain beneath its whole surface by about as much, less what the rest band "
+       "holds (surface.rest_band_mm; check the classification)";
   result.warnings.push_back(w.str());
 }
 
 /// The rest band (ActiveSurfaceParameters::restBandMm): each matched node's displacement u becomes
 /// s u, s = clamp((|m| - band) / band, 0, 1) with m the surface's local mean move at the node (u
-/// filtered by the membrane `restBandSmoothingPasses` times): held at rest below the band, all of it
+/// filtered by the membrane's F, `filter`, `restBandSmoothingPasses` times): held at rest below the band, all of it
 /// beyond twice the band, a continuous ramp between (a step would tear the imposed field between
 /// neighbours). The local mean, not the node's own move: the segmentation's boundary noise changes
 /// from node to node and averages out, a real motion does not, so the rim of a region that moved
 /// keeps its move. Counts the nodes held and those scaled.
-void holdAtRest(Eigen::MatrixXd& u, const std::vector<unsigned char>& freeReason, const MembraneStep& membrane,
+void holdAtRest(Eigen::MatrixXd& u, const std::vector<unsigned char>& freeReason, const MembraneStep& filter,
                 const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
 {
   if (!(p.restBandMm > 0)) return;
   Eigen::MatrixXd local = u;
-  for (unsigned pass = 0; pass < p.restBandSmoothingPasses; ++pass) local = membrane.solve(local);
+  for (unsigned pass = 0; pass < p.restBandSmoothingPasses; ++pass) local = filter.solve(local);
   for (std::size_t i = 0; i < freeReason.size(); ++i) {
     if (freeReason[i] != Matched) continue;
     const Eigen::Index row = Eigen::Index(i);
@@ -1377,7 +1391,7 @@ void holdAtRest(Eigen::MatrixXd& u, const std::vector<unsigned char>& freeReason
 /// where asked, zero where held outside the image, held or scaled down within the rest band; the
 /// surface must not have folded.
 Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& preopBoundary, const SurfaceTopology& topology,
-                                     const MembraneStep& membrane, const std::vector<unsigned char>& freeReason,
+                                     const MembraneStep& filter, const std::vector<unsigned char>& freeReason,
                                      const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
 {
   FitOutcome& fit = fitted.fit;
@@ -1388,7 +1402,7 @@ Eigen::MatrixXd surfaceDisplacements(IntraopFit& fitted, const Eigen::MatrixXd& 
   for (std::size_t i = 0; i < freeReason.size(); ++i) {
     if (freeReason[i] == HeldOutsideImage) u.row(Eigen::Index(i)).setZero();
   }
-  holdAtRest(u, freeReason, membrane, p, result);
+  holdAtRest(u, freeReason, filter, p, result);
   fit.positions = preopBoundary + u;
   requireUnfolded(preopBoundary, fit.positions, topology, result);
   return u;
@@ -1577,7 +1591,8 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   const std::vector<double> initialResiduals = residualsAt(initialPositions, *target.field, target.toIndex);
   IntraopFit fitted = fitIntraopBoundary(membrane, preopBoundary, target, edges.get(), freeReason, p, result);
   warnIfNotConverged(preopFit, preopLabels != nullptr, p, result);
-  if (p.residualCorrection) correctMembraneResidual(fitted.fit, laplacian, membrane, target, freeReason, p, result);
+  const MembraneFilter filter(laplacian, membrane, p);
+  if (p.residualCorrection) correctMembraneResidual(fitted.fit, filter.step(), target, freeReason, p, result);
   result.iterationSeconds = secondsSince(iterationStart);
 
   // -- Nodes left free, the figures, and the deformed surface.
@@ -1589,7 +1604,7 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
     const double warningMm = std::max(p.boundaryOffsetWarningMm, p.boundaryOffsetWarningVoxels * voxelMm);
     measureSegmentationOffset(fitted.fit, preopBoundary, surface.topology, freeReason, warningMm, p, result);
   }
-  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, membrane, freeReason, p, result);
+  const Eigen::MatrixXd u = surfaceDisplacements(fitted, preopBoundary, surface.topology, filter.step(), freeReason, p, result);
   result.surface = deformedSurface(surface, u, preopBoundary, freeReason, result);
   return result;
 }
