@@ -1370,13 +1370,19 @@ void measureSegmentationOffset(const FitOutcome& fit, const Eigen::MatrixXd& pre
 /// beyond twice the band, a continuous ramp between (a step would tear the imposed field between
 /// neighbours). The local mean, not the node's own move: the segmentation's boundary noise changes
 /// from node to node and averages out, a real motion does not, so the rim of a region that moved
-/// keeps its move. Counts the nodes held and those scaled.
+/// keeps its move. Counts the nodes held and those scaled, and the median local move over the
+/// matched nodes (over a surface most of which did not move: the noise the band faces).
 void holdAtRest(Eigen::MatrixXd& u, const std::vector<unsigned char>& freeReason, const MembraneStep& filter,
                 const ActiveSurfaceParameters& p, ActiveSurfaceResult& result)
 {
   if (!(p.restBandMm > 0)) return;
   Eigen::MatrixXd local = u;
   for (unsigned pass = 0; pass < p.restBandSmoothingPasses; ++pass) local = filter.solve(local);
+  std::vector<double> localMoves;
+  for (std::size_t i = 0; i < freeReason.size(); ++i) {
+    if (freeReason[i] == Matched) localMoves.push_back(local.row(Eigen::Index(i)).norm());
+  }
+  if (!localMoves.empty()) result.restLocalMoveMedianMm = median(localMoves);
   for (std::size_t i = 0; i < freeReason.size(); ++i) {
     if (freeReason[i] != Matched) continue;
     const Eigen::Index row = Eigen::Index(i);

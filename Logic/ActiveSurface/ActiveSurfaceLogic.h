@@ -159,6 +159,8 @@ struct ActiveSurfaceResult {
   std::size_t unsnappedNodes = 0;    ///< nodes kept at the membrane's position (snapping would turn a triangle over)
   /// The rest band (restBandMm): imposed nodes held at rest, and those whose move it scaled down.
   std::size_t restHeldNodes = 0, restScaledNodes = 0;
+  /// The median of the local mean move it judged, over the matched nodes (mm; 0: band off).
+  double restLocalMoveMedianMm = 0;
   /// The residual correction (residualCorrection): its mean length over the matched nodes and its largest (mm).
   double residualCorrectionMeanMm = 0, residualCorrectionMaxMm = 0;
   /// The segmentation's offset at the brain boundary (boundaryOffsetWarningMm): the median move of

@@ -404,11 +404,15 @@ void restBandHoldsTheStillSurface()
   const OffsetCase held = sinkSeenWithOffset(0.6, banded);
   std::cout << "rest band 1 mm: far from the sink " << plain.farMoveMm << " -> " << held.farMoveMm << " mm, sink's bottom "
             << plain.sinkMoveMm << " -> " << held.sinkMoveMm << " mm; " << held.result.restHeldNodes << " nodes held, "
-            << held.result.restScaledNodes << " scaled of " << held.result.imposedNodes << " imposed\n";
+            << held.result.restScaledNodes << " scaled of " << held.result.imposedNodes << " imposed, median local move "
+            << held.result.restLocalMoveMedianMm << " mm\n";
   BS_CHECK_NEAR(plain.farMoveMm, -0.6, 0.25);
   BS_CHECK_MSG(std::abs(held.farMoveMm) < 0.2 * std::abs(plain.farMoveMm), held.farMoveMm);
   BS_CHECK_MSG(plain.sinkMoveMm < -5.0, plain.sinkMoveMm);
   BS_CHECK_NEAR(held.sinkMoveMm, plain.sinkMoveMm, 1e-9);
+  BS_CHECK(plain.result.restLocalMoveMedianMm == 0); // band off: nothing judged
+  // Over a surface most of which did not move: the offset and what the membrane moved sideways.
+  BS_CHECK_MSG(held.result.restLocalMoveMedianMm > 0.5 && held.result.restLocalMoveMedianMm < 1.2, held.result.restLocalMoveMedianMm);
   // The ramp itself, on each node's own move (no smoothing): every imposed node's displacement is
   // the unbanded one times clamp((|u| - 1) / 1, 0, 1), and the counts are those nodes.
   ActiveSurfaceParameters ownMove = banded;
