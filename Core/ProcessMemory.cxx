@@ -2,9 +2,14 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include <unistd.h>
+
+#if defined(__linux__) && defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 namespace brainshift {
 
@@ -60,6 +65,14 @@ void restartWithHugePageAllocations(char** argv)
   }
 #else
   (void)argv;
+#endif
+}
+
+void keepFreedMemoryForReuse()
+{
+#if defined(__linux__) && defined(__GLIBC__)
+  mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);
+  mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()); // 2 GiB, mallopt's largest
 #endif
 }
 

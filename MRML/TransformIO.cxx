@@ -12,6 +12,7 @@
 #include <itkTransformFileWriter.h>
 
 #include <algorithm>
+#include <type_traits>
 
 namespace brainshift {
 namespace fs = std::filesystem;
@@ -43,6 +44,14 @@ SpatialTransform::Pointer makeDisplacementFieldTransform(DisplacementFieldImage*
   }
   auto transform = FieldTransform::New();
   transform->SetDisplacementField(doubleField);
+  return transform.GetPointer();
+}
+
+SpatialTransform::Pointer makeDisplacementFieldTransform(DoubleDisplacementFieldImage* field)
+{
+  static_assert(std::is_same_v<DoubleDisplacementFieldImage, DoubleField>, "the composite transforms' field type");
+  auto transform = FieldTransform::New();
+  transform->SetDisplacementField(field);
   return transform.GetPointer();
 }
 

@@ -35,6 +35,11 @@ AffineParameters affineParametersOf(const SpatialTransform* transform);
 /// A displacement field transform (x = y + d(y)) over the field's grid; zero outside it.
 SpatialTransform::Pointer makeDisplacementFieldTransform(DisplacementFieldImage* field);
 
+/// A field of doubles, the type ITK's composite transforms hold.
+using DoubleDisplacementFieldImage = itk::Image<itk::Vector<double, 3>, 3>;
+/// The same over a field of doubles, taken as it is (no copy): for a field made in doubles.
+SpatialTransform::Pointer makeDisplacementFieldTransform(DoubleDisplacementFieldImage* field);
+
 /// The field of a displacement field transform, or null if `transform` is not one.
 DisplacementFieldImage::Pointer displacementFieldOf(const SpatialTransform* transform);
 

@@ -27,6 +27,7 @@ std::string singleLine(const std::string& message)
 int main(int argc, char** argv)
 {
   brainshift::restartWithHugePageAllocations(argv); // first: it may run the program again
+  brainshift::keepFreedMemoryForReuse();
   brainshift::cli::installSignalHandling(); // before any thread: signals end the run cleanly (128 + signal)
   brainshift::cli::silenceLibraryDiagnostics(); // one line per error: ours, naming the file
   CLI::App app{"BrainShift: biomechanical simulation of brain shift for image-guided neurosurgery.\n"

@@ -55,6 +55,7 @@ bool startSession(brainshift::HostMainWindow& window, const QString& preopImage,
 int main(int argc, char* argv[])
 {
   brainshift::restartWithHugePageAllocations(argv); // first: it may run the program again
+  brainshift::keepFreedMemoryForReuse();
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
   QApplication application(argc, argv);
   QApplication::setApplicationName("BrainShift");

@@ -929,34 +929,48 @@ std::string joined(const std::vector<std::string>& parts)
 /// it leaves, e(y) = R^-1(y + d(y)) - y. Inside the field's grid it is the same mapping (R is
 /// affine, so interpolating e then applying R is interpolating d); beyond it (a slab scan covers
 /// part of the head) the mapping is the rigid one, not the identity a displacement field alone gives
-/// outside its grid.
+/// outside its grid. R^-1 is affine (A, t): e(y) = A (y + d(y)) + t - y, made in one parallel pass
+/// over the grid straight into the doubles the transform file holds.
 SpatialTransform::Pointer wholeMappingTransform(const DisplacementFieldImage& field, const SpatialTransform& rigid)
 {
   const SpatialTransform::InverseTransformBasePointer inverse = rigid.GetInverseTransform();
-  auto composite = itk::CompositeTransform<double, 3>::New();
   if (!inverse) throw MethodError("warp: the rigid transform cannot be inverted");
-  auto residual = DisplacementFieldImage::New();
+  const AffineParameters back = affineParametersOf(inverse.GetPointer());
+  auto residual = DoubleDisplacementFieldImage::New();
   residual->CopyInformation(&field);
   residual->SetRegions(field.GetLargestPossibleRegion());
   residual->Allocate();
   const auto size = field.GetLargestPossibleRegion().GetSize();
+  // The point of voxel (x, y, z) is o + D S (x, y, z): a step along x adds the column D S e_x.
+  const auto& direction = field.GetDirection();
+  const auto& spacing = field.GetSpacing();
+  const auto& origin = field.GetOrigin();
+  double step[3][3];
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) step[c][r] = direction[r][c] * spacing[c];
+  }
   const DisplacementVector* d = field.GetBufferPointer();
-  DisplacementVector* e = residual->GetBufferPointer();
+  DoubleDisplacementFieldImage::PixelType* e = residual->GetBufferPointer();
   parallelRanges(size[2], [&](std::size_t zBegin, std::size_t zEnd, unsigned) {
     for (std::size_t z = zBegin; z < zEnd; ++z) {
       for (std::size_t y = 0; y < size[1]; ++y) {
-        for (std::size_t x = 0; x < size[0]; ++x) {
-          const std::size_t at = x + size[0] * (y + size[1] * z);
-          PhysicalPoint p;
-          field.TransformIndexToPhysicalPoint({{itk::IndexValueType(x), itk::IndexValueType(y), itk::IndexValueType(z)}}, p);
-          const PhysicalPoint q = inverse->TransformPoint(p + d[at]);
-          for (unsigned k = 0; k < 3; ++k) e[at][k] = typename DisplacementVector::ValueType(q[k] - p[k]);
+        std::size_t at = size[0] * (y + size[1] * z);
+        double p[3];
+        for (int r = 0; r < 3; ++r) p[r] = origin[r] + step[1][r] * double(y) + step[2][r] * double(z);
+        for (std::size_t x = 0; x < size[0]; ++x, ++at) {
+          const double moved[3] = {p[0] + d[at][0], p[1] + d[at][1], p[2] + d[at][2]};
+          for (int r = 0; r < 3; ++r) {
+            const double q = back.matrix[r][0] * moved[0] + back.matrix[r][1] * moved[1] + back.matrix[r][2] * moved[2] + back.translation[r];
+            e[at][r] = q - p[r];
+          }
+          for (int r = 0; r < 3; ++r) p[r] += step[0][r];
         }
       }
     }
   });
+  auto composite = itk::CompositeTransform<double, 3>::New();
   composite->AddTransform(const_cast<SpatialTransform*>(&rigid)); // applied second
-  composite->AddTransform(makeDisplacementFieldTransform(residual)); // applied first
+  composite->AddTransform(makeDisplacementFieldTransform(residual.GetPointer())); // applied first
   return SpatialTransform::Pointer(composite.GetPointer());
 }
 
