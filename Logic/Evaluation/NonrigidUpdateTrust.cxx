@@ -140,9 +140,10 @@ MaskPointer brainBoundaryVoxelsIn(const std::vector<const LabelImage*>& maps, co
 
 /// Per voxel: 1 band (within the band's half width of a voxel on either side of any map's brain
 /// boundary), 2 interior (brain in the first of the classification and the rigidly warped labels,
-/// beyond the band), 0 elsewhere. One distance map, to the boundary voxels of all the maps, in the
-/// box that holds every map's brain grown by the band and two voxels: beyond it no voxel is
-/// within the band of a boundary, nor inside a brain.
+/// beyond the band), 0 elsewhere. The band: the voxels within its half width of the boundary voxels
+/// of all the maps (voxelsWithin: what their distance map thresholded there gives), in the box that
+/// holds every map's brain grown by the band and two voxels: beyond it no voxel is within the band
+/// of a boundary, nor inside a brain.
 std::vector<unsigned char> regionsOf(const NonrigidUpdateTrustInputs& in, double bandHalfWidthMm, std::size_t n)
 {
   std::vector<unsigned char> region(n, 0);
@@ -157,14 +158,14 @@ std::vector<unsigned char> regionsOf(const NonrigidUpdateTrustInputs& in, double
   for (int a = 0; a < 3; ++a) margin[a] = std::size_t(std::ceil(bandHalfWidthMm / grid.spacing[a])) + 2;
   const IndexBox box = brainBox(maps, grid, margin);
   if (box.voxels() == 0) return region;
-  const ScalarImage::Pointer distance = signedDistanceMm(brainBoundaryVoxelsIn(maps, grid, box));
-  const float* d = distance->GetBufferPointer();
+  const MaskPointer band = voxelsWithin(brainBoundaryVoxelsIn(maps, grid, box), bandHalfWidthMm);
+  const unsigned char* inBand = band->GetBufferPointer();
   const LabelPixel* interior = interiorSource->GetBufferPointer();
   for (std::size_t z = box.first[2], j = 0; z < box.last[2]; ++z) {
     for (std::size_t y = box.first[1]; y < box.last[1]; ++y) {
       const std::size_t row = (z * grid.size[1] + y) * grid.size[0];
       for (std::size_t x = box.first[0]; x < box.last[0]; ++x, ++j) {
-        if (d[j] <= bandHalfWidthMm) region[row + x] = 1;
+        if (inBand[j]) region[row + x] = 1;
         else if (isBrainLabel(interior[row + x])) region[row + x] = 2;
       }
     }
