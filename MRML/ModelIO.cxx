@@ -182,6 +182,10 @@ void writeModel(vtkPointSet* model, const fs::path& path)
     writer->WriteToOutputStringOn();
     writer->SetDataModeToBinary();
     writer->SetCompressorTypeToZLib();
+    // zlib's fastest level: a later scan writes the 96,000-node mesh twice (the mesh, then the
+    // solved mesh) and the surface once; six mesh writes of a watch session 0.66 -> 0.36 s, the
+    // files 5 % larger (mesh.vtu 2.75 -> 2.90 MB).
+    writer->SetCompressionLevel(1);
     writer->AddObserver(vtkCommand::ErrorEvent, onError);
     written = writer->Write() && writer->GetErrorCode() == 0;
     bytes = writer->GetOutputString();
