@@ -29,6 +29,7 @@
 #include <iomanip>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <map>
 #include <optional>
 #include <set>
@@ -1443,7 +1444,9 @@ vtkSmartPointer<vtkPolyData> deformedSurface(const BrainSurface& initial, const 
   result.meanDisplacementMm = mean(magnitudes);
   result.maxDisplacementMm = *std::max_element(magnitudes.begin(), magnitudes.end());
   surface->SetPoints(points);
-  surface->SetPolys(initial.polyData->GetPolys());
+  vtkNew<vtkCellArray> polys; // a copy: the membrane's surface is kept for the next fit, unchanged
+  polys->DeepCopy(initial.polyData->GetPolys());
+  surface->SetPolys(polys);
   surface->GetPointData()->AddArray(displacement);
   surface->GetPointData()->AddArray(magnitude);
   surface->GetPointData()->AddArray(nodeIds);
@@ -1513,6 +1516,67 @@ struct SurfaceMembrane {
     if (!membrane.ok()) throw MethodError("surface: the membrane system could not be factorised");
   }
 };
+
+/// What a SurfaceMembrane is built from: the mesh's points, its cells (each as its size and node
+/// ids) and their labels, and the parameters it reads. Equal keys build the same membrane.
+struct SurfaceMembraneKey {
+  std::vector<double> points, cellLabels;
+  std::vector<vtkIdType> cells;
+  std::vector<int> brainLabels;
+  std::array<double, 4> parameters{};
+
+  bool operator==(const SurfaceMembraneKey& other) const
+  {
+    return points == other.points && cellLabels == other.cellLabels && cells == other.cells && brainLabels == other.brainLabels &&
+           parameters == other.parameters;
+  }
+};
+
+SurfaceMembraneKey surfaceMembraneKeyOf(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const ActiveSurfaceParameters& p)
+{
+  SurfaceMembraneKey key;
+  key.points.resize(3 * std::size_t(mesh->GetNumberOfPoints()));
+  for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) mesh->GetPoint(i, &key.points[3 * std::size_t(i)]);
+  key.cells.reserve(5 * std::size_t(mesh->GetNumberOfCells()));
+  key.cellLabels.reserve(std::size_t(mesh->GetNumberOfCells()));
+  vtkNew<vtkIdList> ids;
+  for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
+    mesh->GetCellPoints(c, ids);
+    key.cells.push_back(ids->GetNumberOfIds());
+    for (vtkIdType k = 0; k < ids->GetNumberOfIds(); ++k) key.cells.push_back(ids->GetId(k));
+    key.cellLabels.push_back(c < cellLabels->GetNumberOfTuples() ? cellLabels->GetComponent(c, 0) : std::nan(""));
+  }
+  key.brainLabels = p.brainLabels;
+  key.parameters = {double(p.tumourLabel), p.timeStep, p.membraneWeight, p.bendingWeight};
+  return key;
+}
+
+/// The mesh's surface membrane, built once for a mesh: a watch session fits its preoperative
+/// boundary and every scan's surface on one mesh, and building the membrane (the mesh's brain
+/// surface, its edges, the Laplacian, two sparse factorisations) took 0.2-0.25 s of a later scan on
+/// one core; comparing the key takes milliseconds. The last one built is kept, whole and never
+/// changed (the fits only read it); a mesh of other content builds its own. Never destroyed: VTK
+/// objects must not outlive VTK's own state at exit.
+std::shared_ptr<const SurfaceMembrane> surfaceMembraneFor(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels,
+                                                         const ActiveSurfaceParameters& p, const std::string& meshName)
+{
+  struct LastBuilt {
+    std::mutex guard;
+    std::shared_ptr<const SurfaceMembraneKey> key;
+    std::shared_ptr<const SurfaceMembrane> membrane;
+  };
+  static LastBuilt* const last = new LastBuilt;
+  auto key = std::make_shared<const SurfaceMembraneKey>(surfaceMembraneKeyOf(mesh, cellLabels, p));
+  {
+    const std::lock_guard<std::mutex> lock(last->guard);
+    if (last->membrane && *last->key == *key) return last->membrane;
+  }
+  auto built = std::make_shared<const SurfaceMembrane>(mesh, cellLabels, p, meshName);
+  const std::lock_guard<std::mutex> lock(last->guard);
+  last->key = std::move(key);
+  last->membrane = built;
+  return built;
+}
 } // namespace
 
 PreoperativeBrainBoundary preoperativeBrainBoundary(vtkUnstructuredGrid* mesh, const LabelImage& preopLabels, const ActiveSurfaceParameters& p,
@@ -1523,7 +1587,8 @@ PreoperativeBrainBoundary preoperativeBrainBoundary(vtkUnstructuredGrid* mesh, c
   vtkDataArray* cellLabels = mesh ? mesh->GetCellData()->GetArray("Label") : nullptr;
   if (!cellLabels) throw InputError(names.mesh + ": the mesh has no cell array \"Label\"");
   // As deformBrainSurface's first steps: the same surface, membrane and fit.
-  const SurfaceMembrane model(mesh, cellLabels, p, names.mesh);
+  const std::shared_ptr<const SurfaceMembrane> membraneOfMesh = surfaceMembraneFor(mesh, cellLabels, p, names.mesh);
+  const SurfaceMembrane& model = *membraneOfMesh;
   const BrainSurface& surface = model.surface;
   const std::size_t n = surface.size();
   const Eigen::MatrixXd smoothedStart = taubinSmoothed(rowsOf(surface.points), model.laplacian, p.restSmoothingIterations);
@@ -1550,7 +1615,8 @@ ActiveSurfaceResult deformBrainSurface(vtkUnstructuredGrid* mesh, const LabelIma
   const ImageGeometry grid = ImageGeometry::of(&intraopLabels);
 
   // -- The preoperative brain surface, what is known of its nodes, and its membrane.
-  const SurfaceMembrane model(mesh, cellLabels, p, names.mesh);
+  const std::shared_ptr<const SurfaceMembrane> membraneOfMesh = surfaceMembraneFor(mesh, cellLabels, p, names.mesh);
+  const SurfaceMembrane& model = *membraneOfMesh;
   const std::set<int>& brain = model.brain;
   const MeshContents& contents = model.contents;
   const BrainSurface& surface = model.surface;

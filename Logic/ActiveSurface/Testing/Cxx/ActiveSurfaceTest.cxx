@@ -1,6 +1,7 @@
 // The active surface: a sphere that shrinks under a rigid motion (the surface lands on the target
 // sphere, moves radially, honours the rigid transform), the small built-in case against its truth,
-// a resected tumour left free, a deep sink's bottom reached, determinism, and bad input named.
+// a resected tumour left free, the membrane kept for its own mesh alone, a deep sink's bottom
+// reached, determinism, and bad input named.
 #include "ActiveSurfaceLogic.h"
 #include "BrainShiftCaseSimulator.h"
 #include "BrainShiftErrors.h"
@@ -15,6 +16,7 @@
 #include <vtkDataArray.h>
 #include <vtkIntArray.h>
 #include <vtkPoints.h>
+#include <vtkUnstructuredGrid.h>
 #include <vtkPointData.h>
 
 #include <algorithm>
@@ -251,6 +253,67 @@ void resectedTumourIsFree()
   const ActiveSurfaceResult intact = deformBrainSurface(mesh.mesh, preop.GetPointer(), *kept, nullptr, *identity, ActiveSurfaceParameters{});
   BS_CHECK(!intact.tumourResected);
   BS_CHECK(intact.imposedNodes == intact.surfaceNodes);
+}
+
+/// The largest distance between each surface point's rest position (point minus displacement)
+/// and its mesh node (MeshNodeId) in `mesh`.
+double restOffFromMesh(vtkPolyData* surface, vtkUnstructuredGrid* mesh)
+{
+  vtkDataArray* displacement = surface->GetPointData()->GetArray("Displacement");
+  vtkDataArray* node = surface->GetPointData()->GetArray("MeshNodeId");
+  double largest = 0;
+  for (vtkIdType i = 0; i < surface->GetNumberOfPoints(); ++i) {
+    double x[3], u[3], m[3];
+    surface->GetPoint(i, x);
+    displacement->GetTuple(i, u);
+    mesh->GetPoint(vtkIdType(std::lround(node->GetComponent(i, 0))), m);
+    for (int k = 0; k < 3; ++k) largest = std::max(largest, std::abs(x[k] - u[k] - m[k]));
+  }
+  return largest;
+}
+
+/// The surface membrane is built once for a mesh and kept for the next fit on it (a watch
+/// session's scans): the same answer again, and a mesh of the same topology whose nodes moved 2 mm,
+/// or whose tumour became parenchyma, gets its own membrane, not the kept one.
+void membraneFollowsTheMesh()
+{
+  const auto preop = sphereLabels(preopGrid(), 35.0, nullptr, true, false);
+  const LabelMapMesh mesh = meshLabelMap(*preop, sphereMeshing({2, 4}));
+  auto identity = itk::Euler3DTransform<double>::New();
+  const auto resected = sphereLabels(preopGrid(), 35.0, nullptr, true, true);
+  const ActiveSurfaceResult first = deformBrainSurface(mesh.mesh, preop.GetPointer(), *resected, nullptr, *identity, ActiveSurfaceParameters{});
+  BS_CHECK(first.tumourResected && first.freeResected > 10);
+  BS_CHECK_MSG(restOffFromMesh(first.surface, mesh.mesh) < 1e-9, restOffFromMesh(first.surface, mesh.mesh));
+
+  vtkNew<vtkUnstructuredGrid> moved;
+  moved->DeepCopy(mesh.mesh);
+  for (vtkIdType i = 0; i < moved->GetNumberOfPoints(); ++i) {
+    double x[3];
+    moved->GetPoint(i, x);
+    x[0] += 2.0;
+    moved->GetPoints()->SetPoint(i, x);
+  }
+  const ActiveSurfaceResult onMoved = deformBrainSurface(moved, preop.GetPointer(), *resected, nullptr, *identity, ActiveSurfaceParameters{});
+  std::cout << "membrane: rest positions " << restOffFromMesh(onMoved.surface, moved) << " mm off the moved mesh's nodes\n";
+  BS_CHECK_MSG(restOffFromMesh(onMoved.surface, moved) < 1e-9, restOffFromMesh(onMoved.surface, moved));
+
+  vtkNew<vtkUnstructuredGrid> noTumour;
+  noTumour->DeepCopy(mesh.mesh);
+  vtkDataArray* labels = noTumour->GetCellData()->GetArray("Label");
+  for (vtkIdType c = 0; c < labels->GetNumberOfTuples(); ++c) {
+    if (std::lround(labels->GetComponent(c, 0)) == 4) labels->SetComponent(c, 0, 2);
+  }
+  const ActiveSurfaceResult withoutTumour =
+    deformBrainSurface(noTumour, preop.GetPointer(), *resected, nullptr, *identity, ActiveSurfaceParameters{});
+  BS_CHECK_MSG(!withoutTumour.tumourResected && withoutTumour.freeResected == 0, withoutTumour.freeResected);
+
+  const ActiveSurfaceResult again = deformBrainSurface(mesh.mesh, preop.GetPointer(), *resected, nullptr, *identity, ActiveSurfaceParameters{});
+  vtkDataArray* u0 = first.surface->GetPointData()->GetArray("Displacement");
+  vtkDataArray* u1 = again.surface->GetPointData()->GetArray("Displacement");
+  BS_CHECK(again.surface->GetNumberOfPoints() == first.surface->GetNumberOfPoints() && again.freeResected == first.freeResected);
+  for (vtkIdType i = 0; i < first.surface->GetNumberOfPoints(); ++i) {
+    for (int k = 0; k < 3; ++k) BS_CHECK(u0->GetComponent(i, k) == u1->GetComponent(i, k));
+  }
 }
 
 /// A deep, narrow sink (12 mm at the top of a 35 mm sphere, a Gaussian of 12 mm): the membrane's
@@ -630,6 +693,7 @@ int ActiveSurfaceTest(int, char*[])
     sphereShrinks();
     imageGuardsAgainstAWrongSegmentation();
     resectedTumourIsFree();
+    membraneFollowsTheMesh();
     deepSinkReachesItsBottom();
     segmentationOffsetIsReported();
     restBandHoldsTheStillSurface();
