@@ -22,7 +22,7 @@ void restartWithHugePageAllocations(char** argv);
 
 /// Called after restartWithHugePageAllocations: freed blocks of up to 32 MiB (a volume of 4 M
 /// floats is 16 MiB) stay in the heap for the next allocation instead of going back to the kernel,
-/// whose fresh pages it must clear again on first touch (perf on a later scan of a watch session:
+/// whose fresh pages it must clear again on first touch (perf on a watch session of three scans:
 /// 12 % of the samples in the kernel clearing pages). glibc's mallopt: the threshold above which a
 /// block gets its own mapping (the largest glibc allows on 64 bits), and no trimming of the heap's
 /// top below 2 GiB. The process keeps its peak heap resident; results are the same.
