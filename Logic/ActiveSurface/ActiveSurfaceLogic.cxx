@@ -1517,6 +1517,19 @@ struct SurfaceMembrane {
   }
 };
 
+/// The parameters a SurfaceMembrane reads, alone (every other at its default): the membrane is
+/// built from these, so the key below, made of them, cannot miss one.
+ActiveSurfaceParameters membraneParametersOf(const ActiveSurfaceParameters& p)
+{
+  ActiveSurfaceParameters m;
+  m.brainLabels = p.brainLabels;
+  m.tumourLabel = p.tumourLabel;
+  m.timeStep = p.timeStep;
+  m.membraneWeight = p.membraneWeight;
+  m.bendingWeight = p.bendingWeight;
+  return m;
+}
+
 /// What a SurfaceMembrane is built from: the mesh's points, its cells (each as its size and node
 /// ids) and their labels, and the parameters it reads. Equal keys build the same membrane.
 struct SurfaceMembraneKey {
@@ -1566,12 +1579,13 @@ std::shared_ptr<const SurfaceMembrane> surfaceMembraneFor(vtkUnstructuredGrid* m
     std::shared_ptr<const SurfaceMembrane> membrane;
   };
   static LastBuilt* const last = new LastBuilt;
-  auto key = std::make_shared<const SurfaceMembraneKey>(surfaceMembraneKeyOf(mesh, cellLabels, p));
+  const ActiveSurfaceParameters read = membraneParametersOf(p);
+  auto key = std::make_shared<const SurfaceMembraneKey>(surfaceMembraneKeyOf(mesh, cellLabels, read));
   {
     const std::lock_guard<std::mutex> lock(last->guard);
     if (last->membrane && *last->key == *key) return last->membrane;
   }
-  auto built = std::make_shared<const SurfaceMembrane>(mesh, cellLabels, p, meshName);
+  auto built = std::make_shared<const SurfaceMembrane>(mesh, cellLabels, read, meshName);
   const std::lock_guard<std::mutex> lock(last->guard);
   last->key = std::move(key);
   last->membrane = built;

@@ -1,6 +1,7 @@
 // voxelsAtLeastDeep and voxelsWithin (the morphology without a distance map) give the voxels the
 // signed Maurer distance map gives (<= -depth, <= reach) voxel for voxel, on a mask of random
-// overlapping balls clear of the grid's edge (concave and convex boundaries, thin bridges), on an
+// overlapping balls clear of the grid's edge (concave and convex boundaries, thin bridges), and
+// voxelsWithin also on balls cut by the grid's edges, on an
 // isotropic and two anisotropic grids, at radii on and between voxel distances. Block matching
 // tests its centres with the same offsets (depthTestOffsets).
 #include "BrainShiftTestingSupport.h"
@@ -56,6 +57,21 @@ int DistanceMapsTest(int, char*[])
         BS_CHECK_MSG(wrongNear == 0, wrongNear << " voxels within " << radiusMm << " mm by one test and not the other");
         BS_CHECK_MSG(deep > 50 && deep < maskVoxels, "the depth test selects " << deep << " of " << maskVoxels << " voxels: nothing tested");
         BS_CHECK_MSG(near > maskVoxels, "nothing beyond the mask is within " << radiusMm << " mm");
+      }
+      // Balls cut by the grid's edges (the trust's box may end at the scan's edge): voxelsWithin
+      // still gives what the distance map gives.
+      const MaskImage::Pointer cut = brainshift::testing::makeRandomBallsMask(spacing, 60.0, 12, {0.0, 20.0}, {2.0, 12.0}, 2001);
+      const ScalarImage::Pointer cutDistance = signedDistanceMm(cut);
+      std::size_t onEdge = 0; // mask voxels on the grid's first x face: the balls are cut there
+      const auto cutSize = cut->GetLargestPossibleRegion().GetSize();
+      for (std::size_t row = 0; row < cutSize[1] * cutSize[2]; ++row) onEdge += cut->GetBufferPointer()[row * cutSize[0]] != 0;
+      BS_CHECK_MSG(onEdge > 10, onEdge << " mask voxels on the grid's edge: the balls are not cut");
+      for (double radiusMm : {2.5, 5.0}) {
+        std::size_t near = 0;
+        const std::size_t wrongNear = disagreements(*voxelsWithin(cut, radiusMm), *cutDistance, false, radiusMm, near);
+        std::cout << "  cut by the edges, " << radiusMm << " mm: " << near << " within (" << wrongNear << " wrong)\n";
+        BS_CHECK_MSG(wrongNear == 0, wrongNear << " voxels within " << radiusMm << " mm of balls cut by the edges by one test and not the other");
+        BS_CHECK_MSG(near > 100, "nothing within " << radiusMm << " mm of the cut balls");
       }
     }
   });
