@@ -1,11 +1,8 @@
 #include "BlockMatching.h"
 
+#include "AffineResampling.h"
 #include "DistanceMaps.h"
-
-#include <itkIdentityTransform.h>
-#include <itkLinearInterpolateImageFunction.h>
-#include <itkNearestNeighborInterpolateImageFunction.h>
-#include <itkResampleImageFilter.h>
+#include "ParallelRanges.h"
 
 #include <algorithm>
 #include <chrono>
@@ -111,29 +108,14 @@ ScalarImage::Pointer matchingGrid(const ScalarImage& preopImage, const LabelImag
   return grid;
 }
 
-template <class Image, class Interpolator>
-Volume<typename Image::PixelType> resampledOnto(const Image& image, const ScalarImage& grid, const SpatialTransform* gridToImage)
+/// `values` (on `grid`, x fastest) as a Volume.
+template <class Pixel>
+Volume<Pixel> volumeOn(const ScalarImage& grid, std::vector<Pixel> values)
 {
-  using Filter = itk::ResampleImageFilter<Image, Image, double>;
-  auto filter = Filter::New();
-  filter->SetInput(&image);
-  filter->SetInterpolator(Interpolator::New());
-  if (gridToImage) {
-    filter->SetTransform(gridToImage);
-  } else {
-    filter->SetTransform(itk::IdentityTransform<double, 3>::New());
-  }
-  filter->SetOutputOrigin(grid.GetOrigin());
-  filter->SetOutputSpacing(grid.GetSpacing());
-  filter->SetOutputDirection(grid.GetDirection());
-  filter->SetSize(grid.GetLargestPossibleRegion().GetSize());
-  filter->SetDefaultPixelValue(0);
-  filter->Update();
-  Volume<typename Image::PixelType> volume;
   const auto size = grid.GetLargestPossibleRegion().GetSize();
+  Volume<Pixel> volume;
   volume.size = {int(size[0]), int(size[1]), int(size[2])};
-  const auto* buffer = filter->GetOutput()->GetBufferPointer();
-  volume.values.assign(buffer, buffer + filter->GetOutput()->GetLargestPossibleRegion().GetNumberOfPixels());
+  volume.values = std::move(values);
   return volume;
 }
 
@@ -238,27 +220,118 @@ SourceBlock sourceBlock(const Volume<float>& image, int ci, int cj, int ck, int 
   return block;
 }
 
-/// Normalised cross-correlation of the source block with the target block centred at (i, j, k);
-/// -2 where the target block leaves the volume or is flat.
-double correlation(const SourceBlock& source, const Volume<float>& target, int ci, int cj, int ck, int h)
+/// Sums of `width` consecutive values along a strided line, sliding (one value in, one out):
+/// out[k * outStride] = in[k * inStride] + ... + in[(k + width - 1) * inStride], k < outputs.
+[[gnu::always_inline]] inline void slidingSums(const double* in, std::size_t inStride, double* out, std::size_t outStride, int outputs,
+                                              int width)
 {
-  if (!target.inside(ci, cj, ck, h) || source.norm <= 0) return -2;
-  double product = 0, sum = 0, squares = 0;
-  std::size_t n = 0;
-  for (int k = ck - h; k <= ck + h; ++k)
-    for (int j = cj - h; j <= cj + h; ++j) {
-      const float* row = &target.values[target.at(ci - h, j, k)];
-      for (int i = 0; i <= 2 * h; ++i, ++n) {
-        const double b = row[i];
-        product += double(source.values[n]) * b;
-        sum += b;
-        squares += b * b;
+  double sum = 0;
+  for (int t = 0; t < width; ++t) sum += in[std::size_t(t) * inStride];
+  for (int k = 0;; ++k) {
+    out[std::size_t(k) * outStride] = sum;
+    if (k + 1 == outputs) break;
+    sum += in[std::size_t(k + width) * inStride] - in[std::size_t(k) * inStride];
+  }
+}
+
+/// The scan around one block's predicted place, for every offset of the search: the target
+/// voxels within reach in doubles, and each offset's window sum and sum of squares by separable box
+/// sums, so that an offset's normalised cross-correlation with the source block takes one product
+/// per voxel (summed directly, it took three sums and a conversion per voxel: the same matches, their
+/// displacements within 1e-11 mm; a later scan's matching of 3,000 blocks 0.50-0.58 -> 0.26-0.29 s).
+class SearchWindow {
+public:
+  SearchWindow(const Volume<float>& target, const std::array<int, 3>& start, int radius, int h)
+    : radius_(radius), h_(h), width_(2 * (radius + h) + 1), offsets_(2 * radius + 1)
+  {
+    const std::size_t w = std::size_t(width_);
+    values_.assign(w * w * w, 0.0);
+    for (int z = 0; z < width_; ++z)
+      for (int y = 0; y < width_; ++y)
+        for (int x = 0; x < width_; ++x) {
+          const int i = start[0] - radius - h + x, j = start[1] - radius - h + y, k = start[2] - radius - h + z;
+          if (i < 0 || j < 0 || k < 0 || i >= target.size[0] || j >= target.size[1] || k >= target.size[2]) continue;
+          values_[at(x, y, z)] = target.values[target.at(i, j, k)];
+        }
+    // Box sums of 2h + 1 along x, then y, then z: a window's sum and sum of squares per offset.
+    const int b = 2 * h + 1, o = offsets_;
+    const std::size_t ow = std::size_t(o);
+    std::vector<double> squared(values_.size());
+    for (std::size_t v = 0; v < values_.size(); ++v) squared[v] = values_[v] * values_[v];
+    std::vector<double> sx(ow * w * w), qx(sx.size()), sy(ow * ow * w), qy(sy.size());
+    sums_.assign(ow * ow * ow, 0.0);
+    squares_.assign(sums_.size(), 0.0);
+    for (std::size_t line = 0; line < w * w; ++line) { // x: lines (y, z) of the window
+      slidingSums(&values_[line * w], 1, &sx[line * ow], 1, o, b);
+      slidingSums(&squared[line * w], 1, &qx[line * ow], 1, o, b);
+    }
+    for (std::size_t z = 0; z < w; ++z) // y: lines (x, z) of the x sums
+      for (std::size_t x = 0; x < ow; ++x) {
+        slidingSums(&sx[x + ow * w * z], ow, &sy[x + ow * ow * z], ow, o, b);
+        slidingSums(&qx[x + ow * w * z], ow, &qy[x + ow * ow * z], ow, o, b);
+      }
+    for (std::size_t line = 0; line < ow * ow; ++line) { // z: lines (x, y) of the y sums
+      slidingSums(&sy[line], ow * ow, &sums_[line], ow * ow, o, b);
+      slidingSums(&qy[line], ow * ow, &squares_[line], ow * ow, o, b);
+    }
+    inside_.resize(sums_.size());
+    for (int z = 0; z < o; ++z)
+      for (int y = 0; y < o; ++y)
+        for (int x = 0; x < o; ++x) {
+          inside_[offsetIndex(x, y, z)] = target.inside(start[0] - radius + x, start[1] - radius + y, start[2] - radius + z, h);
+        }
+  }
+
+  /// The correlation of `source` (its values as doubles in `sourceValues`) at each of `count`
+  /// offsets (each within the radius): -2 where the window leaves the volume or is flat.
+  void correlations(const SourceBlock& source, const std::vector<double>& sourceValues, const std::array<int, 3>* offsets,
+                    std::size_t count, double* scores) const
+  {
+    constexpr std::size_t Lanes = 4;
+    for (std::size_t first = 0; first < count; first += Lanes) {
+      const std::size_t lanes = std::min(Lanes, count - first);
+      const double* corner[Lanes];
+      double product[Lanes] = {0, 0, 0, 0};
+      for (std::size_t m = 0; m < Lanes; ++m) {
+        const auto& o = offsets[first + std::min(m, lanes - 1)]; // a short batch repeats its last offset
+        corner[m] = &values_[at(o[0] + radius_, o[1] + radius_, o[2] + radius_)];
+      }
+      const int b = 2 * h_ + 1;
+      std::size_t n = 0;
+      for (int z = 0; z < b; ++z)
+        for (int y = 0; y < b; ++y, n += std::size_t(b)) {
+          const std::size_t row = std::size_t(width_) * (std::size_t(y) + std::size_t(width_) * std::size_t(z));
+          const double* s = &sourceValues[n];
+          for (int x = 0; x < b; ++x) {
+            const double a = s[x];
+            for (std::size_t m = 0; m < Lanes; ++m) product[m] += a * corner[m][row + std::size_t(x)];
+          }
+        }
+      for (std::size_t m = 0; m < lanes; ++m) {
+        const auto& o = offsets[first + m];
+        const std::size_t k = offsetIndex(o[0] + radius_, o[1] + radius_, o[2] + radius_);
+        const double variance = squares_[k] - sums_[k] * sums_[k] / double(n);
+        // Flat: no variance beyond the sums' rounding (a constant window's sliding sums keep a
+        // residue of the voxels they slid past).
+        const bool flat = variance <= 1e-12 || variance <= 1e-10 * squares_[k];
+        scores[first + m] = !inside_[k] || source.norm <= 0 || flat ? -2.0 : product[m] / (source.norm * std::sqrt(variance));
       }
     }
-  const double targetVariance = squares - sum * sum / double(n);
-  if (targetVariance <= 1e-12) return -2;
-  return product / (source.norm * std::sqrt(targetVariance));
-}
+  }
+
+private:
+  std::size_t at(int x, int y, int z) const
+  {
+    return std::size_t(x) + std::size_t(width_) * (std::size_t(y) + std::size_t(width_) * std::size_t(z));
+  }
+  std::size_t offsetIndex(int x, int y, int z) const
+  {
+    return std::size_t(x) + std::size_t(offsets_) * (std::size_t(y) + std::size_t(offsets_) * std::size_t(z));
+  }
+  int radius_, h_, width_, offsets_;
+  std::vector<double> values_, sums_, squares_;
+  std::vector<unsigned char> inside_;
+};
 
 struct GridGeometry {
   itk::Matrix<double, 3, 3> indexToPhysical; ///< D S
@@ -333,30 +406,47 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, Blo
     for (int b = 0; b < 3; ++b) offset += c.geometry.physicalToIndex(a, b) * match.predicted[std::size_t(b)];
     start[std::size_t(a)] = centre[std::size_t(a)] + int(std::lround(offset));
   }
-  auto score = [&](const std::array<int, 3>& o) {
-    return correlation(source, c.intraop, start[0] + o[0], start[1] + o[1], start[2] + o[2], c.h);
+  const SearchWindow window(c.intraop, start, c.radius, c.h);
+  const std::vector<double> sourceValues(source.values.begin(), source.values.end());
+  std::vector<std::array<int, 3>> offsets;
+  std::vector<double> scores;
+  auto scoreAll = [&] {
+    scores.resize(offsets.size());
+    window.correlations(source, sourceValues, offsets.data(), offsets.size(), scores.data());
   };
-  // Coarse pass over the window, then every voxel around the coarse peak.
+  auto score = [&](const std::array<int, 3>& o) {
+    double value = 0;
+    window.correlations(source, sourceValues, &o, 1, &value);
+    return value;
+  };
+  // Coarse pass over the window, then every voxel around the coarse peak; the offsets are taken in
+  // the order of the loops, so a tie goes to the first as it always did.
   std::array<int, 3> best{0, 0, 0};
   double bestScore = -3;
   const int coarseReach = c.radius / c.coarseStep * c.coarseStep;
+  offsets.clear();
   for (int z = -coarseReach; z <= coarseReach; z += c.coarseStep)
     for (int y = -coarseReach; y <= coarseReach; y += c.coarseStep)
-      for (int x = -coarseReach; x <= coarseReach; x += c.coarseStep) {
-        const double s = score({x, y, z});
-        if (s > bestScore) { bestScore = s; best = {x, y, z}; }
-      }
+      for (int x = -coarseReach; x <= coarseReach; x += c.coarseStep) offsets.push_back({x, y, z});
+  scoreAll();
+  for (std::size_t o = 0; o < offsets.size(); ++o) {
+    if (scores[o] > bestScore) { bestScore = scores[o]; best = offsets[o]; }
+  }
   for (int pass = 0; pass < 4; ++pass) { // hill-climb at one voxel until the peak stays
     const std::array<int, 3> around = best;
     const int reach = pass == 0 ? c.coarseStep - 1 : 1;
+    offsets.clear();
     for (int z = -reach; z <= reach; ++z)
       for (int y = -reach; y <= reach; ++y)
         for (int x = -reach; x <= reach; ++x) {
           const std::array<int, 3> o{around[0] + x, around[1] + y, around[2] + z};
           if (std::abs(o[0]) > c.radius || std::abs(o[1]) > c.radius || std::abs(o[2]) > c.radius) continue;
-          const double s = score(o);
-          if (s > bestScore) { bestScore = s; best = o; }
+          offsets.push_back(o);
         }
+    scoreAll();
+    for (std::size_t o = 0; o < offsets.size(); ++o) {
+      if (scores[o] > bestScore) { bestScore = scores[o]; best = offsets[o]; }
+    }
     if (best == around && pass > 0) break;
   }
   match.similarity = bestScore;
@@ -408,21 +498,26 @@ MatchingVolumes prepareVolumes(const ScalarImage& preopImage, const LabelImage& 
   if (!v.grid) return v;
   const auto preopToIntraop = rigidIntraopToPreop.GetInverseTransform();
   if (!preopToIntraop) throw std::invalid_argument("block matching: the rigid transform cannot be inverted");
-  using LinearScalar = itk::LinearInterpolateImageFunction<ScalarImage, double>;
-  using NearestLabel = itk::NearestNeighborInterpolateImageFunction<LabelImage, double>;
-  v.remapped = resampledOnto<ScalarImage, LinearScalar>(preopImage, *v.grid, nullptr);
-  v.preopLabels = resampledOnto<LabelImage, NearestLabel>(preopLabels, *v.grid, nullptr);
-  v.intraop = resampledOnto<ScalarImage, LinearScalar>(intraopImage, *v.grid, preopToIntraop.GetPointer());
-  v.intraopLabels = resampledOnto<LabelImage, NearestLabel>(intraopLabels, *v.grid, preopToIntraop.GetPointer());
+  // As ITK's ResampleImageFilter with its linear and nearest-neighbour interpolators, to rounding
+  // (AffineResampling.h), in a seventh of the time.
+  const ImageGeometry onGrid = ImageGeometry::of(v.grid.GetPointer());
+  v.remapped = volumeOn(*v.grid, linearlyResampled(preopImage, onGrid, nullptr));
+  v.preopLabels = volumeOn(*v.grid, nearestResampled(preopLabels, onGrid, nullptr));
+  v.intraop = volumeOn(*v.grid, linearlyResampled(intraopImage, onGrid, preopToIntraop.GetPointer()));
+  v.intraopLabels = volumeOn(*v.grid, nearestResampled(intraopLabels, onGrid, preopToIntraop.GetPointer()));
   const std::size_t voxels = v.remapped.values.size();
   std::vector<char> brainInBoth(voxels);
   v.preopBrain.resize(voxels);
-  for (std::size_t n = 0; n < voxels; ++n) {
-    v.preopBrain[n] = isBrain(parameters.brainLabels, v.preopLabels.values[n]);
-    brainInBoth[n] = v.preopBrain[n] && isBrain(parameters.brainLabels, v.intraopLabels.values[n]);
-  }
+  parallelRanges(voxels, [&](std::size_t begin, std::size_t end, unsigned) {
+    for (std::size_t n = begin; n < end; ++n) {
+      v.preopBrain[n] = isBrain(parameters.brainLabels, v.preopLabels.values[n]);
+      brainInBoth[n] = v.preopBrain[n] && isBrain(parameters.brainLabels, v.intraopLabels.values[n]);
+    }
+  });
   const IntensityRemap remap = learnRemap(v.remapped, v.intraop, brainInBoth, correlationRatio);
-  for (float& value : v.remapped.values) value = float(remap(value));
+  parallelRanges(voxels, [&](std::size_t begin, std::size_t end, unsigned) {
+    for (std::size_t n = begin; n < end; ++n) v.remapped.values[n] = float(remap(v.remapped.values[n]));
+  });
   return v;
 }
 

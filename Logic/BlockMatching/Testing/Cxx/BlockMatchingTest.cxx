@@ -5,6 +5,9 @@
 // - a prediction 4 mm off is corrected within the search window;
 // - blocks whose match falls in a cavity of the scan are dropped, none is kept there;
 // - blocks holding an excluded tissue (a resected tumour) are not matched;
+// - a flat region of the scan (one grey level, no noise: a fluid-filled cavity's signal void) is
+//   no match for anything, and no correlation exceeds 1 (the windows' sums slide, and a flat
+//   window's residue of rounding must not pass for variance);
 // - a refine pass's new classification: the earlier matches whose block it no longer calls brain
 //   are dropped, the others kept as they were;
 // - absurd parameters are refused.
@@ -149,6 +152,27 @@ int BlockMatchingTest(int, char*[])
     BS_CHECK_MSG(inCavity == 0, inCavity);
     BS_CHECK_MSG(nearTumour == 0, nearTumour);
     for (const BlockMatch& m : result.matches) BS_CHECK_MSG(m.similarity > 0.5, m.similarity); // positive through the inversion
+
+    // A ball of the scan at one grey level: its windows are flat, no block matches inside it.
+    const std::array<double, 3> flatCentre{-5, -20, 10}; // in the scan's preoperative frame
+    const ScalarImage::Pointer flat = testing::imageOn<ScalarImage>(intraopGrid, [&](const PhysicalPoint& y) {
+      return distance(rigid->TransformPoint(y), flatCentre) < 14 ? 250.0f : intraop->GetPixel(intraop->TransformPhysicalPointToIndex(y));
+    });
+    const BlockMatchingResult withFlat = matchBlocks(*preop, *preopLabels, *flat, *intraopLabels, *rigid, none, parameters);
+    std::size_t inFlat = 0;
+    double highest = -2;
+    for (const BlockMatch& m : withFlat.matches) {
+      PhysicalPoint target = m.centre;
+      for (int a = 0; a < 3; ++a) target[a] += m.displacement[std::size_t(a)];
+      if (distance(target, flatCentre) < 5) ++inFlat;
+      highest = std::max(highest, m.similarity);
+    }
+    for (const BlockMatch& m : result.matches) highest = std::max(highest, m.similarity);
+    std::cout << "a flat ball of 14 mm: " << withFlat.matches.size() << " matched (" << withFlat.lowSimilarity
+              << " low similarity), " << inFlat << " inside it; the highest correlation " << highest << '\n';
+    BS_CHECK_MSG(inFlat == 0, inFlat);
+    BS_CHECK_MSG(withFlat.lowSimilarity > result.lowSimilarity, withFlat.lowSimilarity << " vs " << result.lowSimilarity);
+    BS_CHECK_MSG(highest <= 1 + 1e-9, highest);
 
     // A prediction 4 mm off: found again within the search window.
     const DisplacementPrediction off = [&](const PhysicalPoint&) { return std::array<double, 3>{shift[0] + 2.5, shift[1] - 2.0, shift[2] + 2.4}; };
