@@ -75,14 +75,16 @@ AtomicFile::AtomicFile(fs::path target)
   : target_(std::move(target))
 {
   const fs::path folder = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
-  std::error_code ec;
-  fs::create_directories(folder, ec);
-  if (ec) {
-    throw InputError("cannot create folder " + folder.string() + ": " + ec.message());
-  }
   temporary_ = folder / (".tmp-" + std::to_string(::getpid()) + "-" +
                          std::to_string(temporaryCounter++) + "-" + target_.filename().string());
-  cleanup::addTemporaryPath(temporary_);
+  // Registered before its folder is made: a run ending on a signal removes its folders, and a
+  // writer must not make one again behind the cleanup (it blocks here instead).
+  std::error_code ec;
+  cleanup::createRegistered(temporary_, [&] { fs::create_directories(folder, ec); });
+  if (ec) {
+    cleanup::withdrawTemporaryPath(temporary_);
+    throw InputError("cannot create folder " + folder.string() + ": " + ec.message());
+  }
 }
 
 AtomicFile::~AtomicFile()

@@ -4,10 +4,13 @@
 #include <cerrno>
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <mutex>
 #include <set>
 #include <string>
+#include <system_error>
 #include <thread>
+#include <vector>
 #include <unistd.h>
 
 namespace brainshift::cleanup {
@@ -55,6 +58,24 @@ void addTemporaryPath(const fs::path& path)
   registry().paths.insert(path);
 }
 
+void createRegistered(const fs::path& path, const std::function<void()>& create)
+{
+  auto lock = lockUnlessEnding();
+  registry().paths.insert(path);
+  create();
+}
+
+fs::path makeTemporaryFolder(const std::string& pattern)
+{
+  std::vector<char> name(pattern.begin(), pattern.end());
+  name.push_back('\0');
+  auto lock = lockUnlessEnding();
+  if (!::mkdtemp(name.data())) throw std::system_error(errno, std::generic_category(), "mkdtemp " + pattern);
+  const fs::path made(name.data());
+  registry().paths.insert(made);
+  return made;
+}
+
 void withdrawTemporaryPath(const fs::path& path)
 {
   std::lock_guard<std::mutex> lock(registry().mutex);
@@ -65,6 +86,14 @@ void addProcessGroup(pid_t group)
 {
   auto lock = lockUnlessEnding();
   registry().groups.insert(group);
+}
+
+pid_t startRegisteredGroup(const std::function<pid_t()>& start)
+{
+  auto lock = lockUnlessEnding();
+  const pid_t group = start();
+  if (group > 0) registry().groups.insert(group);
+  return group;
 }
 
 void withdrawProcessGroup(pid_t group)
@@ -90,9 +119,18 @@ void terminateAndRemoveAll(double graceSeconds)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   for (pid_t group : groups) ::kill(-group, SIGKILL);
-  for (const fs::path& path : paths) {
-    std::error_code ignored;
-    fs::remove_all(path, ignored);
+  // Another thread may be writing into a registered folder right now (a file it opened before the
+  // process began ending): a removal that found the folder not empty is tried again.
+  const auto removalDeadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(500);
+  for (;;) {
+    bool anyLeft = false;
+    for (const fs::path& path : paths) {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
+      anyLeft = anyLeft || fs::symlink_status(path, ignored).type() != fs::file_type::not_found;
+    }
+    if (!anyLeft || std::chrono::steady_clock::now() >= removalDeadline) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }
 

@@ -8,6 +8,7 @@
 #include <optional>
 #include <csignal>
 #include <cstring>
+#include <system_error>
 #include <fcntl.h>
 #include <poll.h>
 #include <pthread.h>
@@ -105,25 +106,29 @@ public:
     if (::pipe(in) != 0 || ::pipe(out) != 0 || ::pipe(err) != 0) {
       throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
     }
-    child_ = ::fork();
+    std::vector<char*> argv; // made before the fork: the child of a threaded process must not allocate
+    for (auto& a : arguments) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    // Started and registered as one step: a signal's cleanup either ends this worker or comes
+    // before it is started (this thread then blocks here until the process exits).
+    child_ = cleanup::startRegisteredGroup([&] {
+      const pid_t child = ::fork();
+      if (child == 0) {
+        ::setpgid(0, 0); // its own process group: every rank can be stopped together
+        ::dup2(in[0], STDIN_FILENO);
+        ::dup2(out[1], STDOUT_FILENO);
+        ::dup2(err[1], STDERR_FILENO);
+        ::close(in[1]);
+        ::close(out[0]);
+        ::close(err[0]);
+        ::execvp(argv[0], argv.data());
+        std::fprintf(stderr, "cannot run %s: %s\n", argv[0], std::strerror(errno));
+        ::_exit(127);
+      }
+      if (child > 0) ::setpgid(child, child);
+      return child;
+    });
     if (child_ < 0) throw MethodError(std::string("cannot start the worker: ") + std::strerror(errno));
-    if (child_ == 0) {
-      ::setpgid(0, 0); // its own process group: every rank can be stopped together
-      ::dup2(in[0], STDIN_FILENO);
-      ::dup2(out[1], STDOUT_FILENO);
-      ::dup2(err[1], STDERR_FILENO);
-      ::close(in[1]);
-      ::close(out[0]);
-      ::close(err[0]);
-      std::vector<char*> argv;
-      for (auto& a : arguments) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      ::execvp(argv[0], argv.data());
-      std::fprintf(stderr, "cannot run %s: %s\n", argv[0], std::strerror(errno));
-      ::_exit(127);
-    }
-    ::setpgid(child_, child_);
-    cleanup::addProcessGroup(child_); // a signal to the caller ends the worker too
     ::close(in[0]);
     ::close(out[1]);
     ::close(err[1]);
@@ -283,11 +288,12 @@ TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
 {
   TemporaryFolder folder;
   if (options.workFolder.empty()) {
-    char pattern[] = "/tmp/brainshift-fe-XXXXXX";
-    if (!::mkdtemp(pattern)) throw MethodError(std::string("cannot create a work folder: ") + std::strerror(errno));
-    folder.path = pattern;
+    try {
+      folder.path = cleanup::makeTemporaryFolder("/tmp/brainshift-fe-XXXXXX"); // registered as it is made
+    } catch (const std::system_error& e) {
+      throw MethodError(std::string("cannot create a work folder: ") + e.code().message());
+    }
     folder.owned = true;
-    cleanup::addTemporaryPath(folder.path);
   } else {
     folder.path = options.workFolder;
     fs::create_directories(folder.path);

@@ -1,11 +1,18 @@
 // What a run leaves behind when it is ended: the temporaries of runs that were killed outright are
 // found by their process id and removed (and only theirs); a signal's cleanup terminates the
-// workers' process groups (SIGKILL for one that ignores SIGTERM) and removes the registered paths.
+// workers' process groups (SIGKILL for one that ignores SIGTERM) and removes the registered paths;
+// a thread that keeps making work folders and files in them while the cleanup runs leaves nothing
+// behind (it is stopped before it makes the next one, and what it was writing is removed after
+// it), and a worker started as the cleanup begins is either ended by it or never started.
 #include "BrainShiftTestingSupport.h"
 #include "ProcessCleanup.h"
 
+#include <chrono>
 #include <csignal>
 #include <fstream>
+#include <mutex>
+#include <thread>
+#include <vector>
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -85,6 +92,72 @@ int cleanupInChild(const fs::path& temporaryFile, const fs::path& temporaryFolde
   BS_CHECK(::waitpid(child, &status, 0) == child);
   return WIFEXITED(status) ? WEXITSTATUS(status) : 100;
 }
+
+/// In a child process: a thread makes work folders under `base` and files in them (as a worker's
+/// job folder and the atomic writer's temporaries are made) as fast as it can, and another starts
+/// worker groups, while this thread ends the process's registry after `delayMs`. Exit 0 when
+/// nothing is left under `base` and every worker started is gone, 4 when a folder or a file is
+/// left, 1 when a worker outlived the cleanup.
+int racingCleanupInChild(const fs::path& base, int delayMs)
+{
+  const pid_t child = ::fork();
+  BS_CHECK(child >= 0);
+  if (child == 0) {
+    using namespace brainshift;
+    std::thread writer([&base] {
+      for (int n = 0;; ++n) {
+        const fs::path folder = cleanup::makeTemporaryFolder((base / "work-XXXXXX").string());
+        const fs::path file = folder / ".tmp-job";
+        cleanup::createRegistered(file, [&] { fs::create_directories(folder); });
+        std::ofstream(file) << "job " << n;
+        cleanup::withdrawTemporaryPath(file);
+        std::error_code ignored;
+        fs::remove_all(folder, ignored);
+        cleanup::withdrawTemporaryPath(folder);
+      }
+    });
+    std::vector<pid_t> started; // read after the cleanup only
+    std::mutex startedMutex;
+    std::thread launcher([&] {
+      for (;;) {
+        const pid_t worker = cleanup::startRegisteredGroup([] {
+          const pid_t pid = ::fork();
+          if (pid == 0) {
+            ::setpgid(0, 0);
+            for (;;) ::pause();
+          }
+          if (pid > 0) ::setpgid(pid, pid);
+          return pid;
+        });
+        {
+          std::lock_guard<std::mutex> lock(startedMutex);
+          started.push_back(worker);
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      }
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(delayMs));
+    cleanup::terminateAndRemoveAll(0.02); // the workers are this process's unreaped children: no grace to wait out
+    bool workerLeft = false;
+    {
+      std::lock_guard<std::mutex> lock(startedMutex);
+      for (pid_t worker : started) {
+        int status = 0;
+        const pid_t reaped = ::waitpid(worker, &status, WNOHANG);
+        if (reaped == 0 && ::kill(worker, 0) == 0) {
+          workerLeft = true;
+          ::kill(-worker, SIGKILL); // not left to hold the test's output open
+        }
+      }
+    }
+    std::error_code ec;
+    const bool anythingLeft = fs::directory_iterator(base, ec) != fs::directory_iterator();
+    ::_exit((anythingLeft ? 4 : 0) | (workerLeft ? 1 : 0)); // the blocked threads end with the process
+  }
+  int status = 0;
+  BS_CHECK(::waitpid(child, &status, 0) == child);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 100;
+}
 } // namespace
 
 int ProcessCleanupTest(int, char*[])
@@ -130,6 +203,16 @@ int ProcessCleanupTest(int, char*[])
                                           "not killed, 4: a registered path is still there, 8: a worker could not be started)");
     BS_CHECK(!fs::exists(pending) && !fs::exists(jobFolder));
     BS_CHECK(fs::exists(folder / "report.json"));
+
+    // Racing the cleanup: 20 runs, the cleanup 1 to 20 ms into the threads' work.
+    const fs::path racing = folder / "racing";
+    for (int run = 0; run < 20; ++run) {
+      fs::create_directories(racing);
+      const int raced = racingCleanupInChild(racing, 1 + run);
+      BS_CHECK_MSG(raced == 0, "run " << run << ": exit " << raced << " (4: a work folder or file was left, 1: a worker outlived the cleanup)");
+      std::error_code ignored;
+      fs::remove_all(racing, ignored);
+    }
 
     const fs::path committed = folder / "committed.json";
     std::ofstream(committed) << "{}";
