@@ -21,7 +21,11 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <future>
+#include <memory>
 #include <numeric>
+#include <stdexcept>
 
 namespace brainshift {
 
@@ -380,7 +384,11 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
                                 double reachMm)
 {
   const std::size_t n = correction.located.size();
-  std::vector<float> distance(n, std::numeric_limits<float>::infinity()), continued(3 * n, 0.0f);
+  std::vector<float> distance(n, std::numeric_limits<float>::infinity());
+  // Each band voxel's place in band.w, set when its layer is done (read only where its distance
+  // is finite): 4 bytes a voxel, uninitialised, where a dense copy of the corrections took 12, zeroed.
+  if (n >= std::size_t(std::numeric_limits<std::uint32_t>::max())) throw std::invalid_argument("warp: the grid is too large to continue the correction");
+  const std::unique_ptr<std::uint32_t[]> slot(new std::uint32_t[n]);
   std::vector<unsigned char> queued(correction.located);
   for (std::size_t at = 0; at < n; ++at) {
     if (correction.located[at]) distance[at] = 0.0f;
@@ -408,18 +416,18 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
   Continuation band;
   while (!frontier.empty()) {
     std::vector<std::size_t> layer;
-    std::vector<float> layerDistance;
+    std::vector<float> layerDistance, layerW;
     for (std::size_t at : frontier) {
       double sum[3] = {0, 0, 0}, count = 0, nearest = std::numeric_limits<double>::infinity();
       forNeighbours(at, [&](std::size_t nb, double step) {
         if (!std::isfinite(distance[nb])) return;
-        const float* w = correction.located[nb] ? &correction.w[3 * nb] : &continued[3 * nb];
+        const float* w = correction.located[nb] ? &correction.w[3 * nb] : &band.w[3 * std::size_t(slot[nb])];
         for (int d = 0; d < 3; ++d) sum[d] += w[d];
         count += 1;
         nearest = std::min(nearest, double(distance[nb]) + step);
       });
       if (count == 0 || nearest > reachMm) continue;
-      for (int d = 0; d < 3; ++d) continued[3 * at + std::size_t(d)] = float(sum[d] / count);
+      for (int d = 0; d < 3; ++d) layerW.push_back(float(sum[d] / count));
       layer.push_back(at);
       layerDistance.push_back(float(nearest));
     }
@@ -427,8 +435,9 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
     for (std::size_t l = 0; l < layer.size(); ++l) { // set after the layer: its voxels see the layers before alone
       const std::size_t at = layer[l];
       distance[at] = layerDistance[l];
+      slot[at] = std::uint32_t(band.voxels.size());
       band.voxels.push_back(at);
-      for (int d = 0; d < 3; ++d) band.w.push_back(continued[3 * at + std::size_t(d)]);
+      for (int d = 0; d < 3; ++d) band.w.push_back(layerW[3 * l + std::size_t(d)]);
       band.distanceMm.push_back(layerDistance[l]);
       forNeighbours(at, [&](std::size_t nb, double) {
         if (!queued[nb]) {
@@ -567,10 +576,19 @@ DeformationField intraopToPreopField(vtkUnstructuredGrid* mesh, const SpatialTra
 
   const auto fallbackStart = std::chrono::steady_clock::now();
   result.meshVoxels = std::size_t(std::count(correction.located.begin(), correction.located.end(), 1));
-  const Continuation band = parameters.continuationMaximumMm > 0
-                              ? continueCorrection(correction, lattice, grid, parameters.continuationMaximumMm)
-                              : Continuation{};
-  result.fallbackSigmaMm = fadeCorrectionOutsideMesh(correction, grid, lattice, parameters.fallbackSigmaMm);
+  // The continuation (layer by layer, on one core) beside the fade (on the others): it reads the
+  // mesh's voxels alone, the fade writes the others alone; the blend takes both.
+  std::future<Continuation> continued = std::async(std::launch::async, [&] {
+    return parameters.continuationMaximumMm > 0 ? continueCorrection(correction, lattice, grid, parameters.continuationMaximumMm)
+                                                : Continuation{};
+  });
+  try {
+    result.fallbackSigmaMm = fadeCorrectionOutsideMesh(correction, grid, lattice, parameters.fallbackSigmaMm);
+  } catch (...) {
+    continued.wait(); // its references must outlive it
+    throw;
+  }
+  const Continuation band = continued.get();
   if (!band.voxels.empty()) result.continuationBandMm = blendContinuation(correction, band, grid, parameters, result.continuedVoxels);
   result.fallbackSeconds = secondsSince(fallbackStart);
 
