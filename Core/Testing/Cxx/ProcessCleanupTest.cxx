@@ -141,10 +141,16 @@ int racingCleanupInChild(const fs::path& base, int delayMs)
     bool workerLeft = false;
     {
       std::lock_guard<std::mutex> lock(startedMutex);
+      // A worker the cleanup killed is gone within moments (however loaded the machine, a second
+      // is plenty); one it never knew of pauses for ever.
+      const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
       for (pid_t worker : started) {
         int status = 0;
-        const pid_t reaped = ::waitpid(worker, &status, WNOHANG);
-        if (reaped == 0 && ::kill(worker, 0) == 0) {
+        pid_t reaped = 0;
+        while ((reaped = ::waitpid(worker, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        if (reaped == 0) {
           workerLeft = true;
           ::kill(-worker, SIGKILL); // not left to hold the test's output open
         }
