@@ -33,6 +33,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <tuple>
 #include <sstream>
 
 namespace brainshift {
@@ -1517,16 +1518,20 @@ struct SurfaceMembrane {
   }
 };
 
-/// The parameters a SurfaceMembrane reads, alone (every other at its default): the membrane is
-/// built from these, so the key below, made of them, cannot miss one.
+/// The fields of ActiveSurfaceParameters a SurfaceMembrane reads: the one list its parameters and
+/// its cache key are both made of.
+template <class Parameters>
+auto membraneFields(Parameters& p)
+{
+  return std::tie(p.brainLabels, p.tumourLabel, p.timeStep, p.membraneWeight, p.bendingWeight);
+}
+
+/// Those fields of `p` alone (every other at its default): the membrane is built from these, so
+/// no field it reads can slip past the key.
 ActiveSurfaceParameters membraneParametersOf(const ActiveSurfaceParameters& p)
 {
   ActiveSurfaceParameters m;
-  m.brainLabels = p.brainLabels;
-  m.tumourLabel = p.tumourLabel;
-  m.timeStep = p.timeStep;
-  m.membraneWeight = p.membraneWeight;
-  m.bendingWeight = p.bendingWeight;
+  membraneFields(m) = membraneFields(p);
   return m;
 }
 
@@ -1535,17 +1540,16 @@ ActiveSurfaceParameters membraneParametersOf(const ActiveSurfaceParameters& p)
 struct SurfaceMembraneKey {
   std::vector<double> points, cellLabels;
   std::vector<vtkIdType> cells;
-  std::vector<int> brainLabels;
-  std::array<double, 4> parameters{};
+  ActiveSurfaceParameters parameters; ///< membraneParametersOf
 
   bool operator==(const SurfaceMembraneKey& other) const
   {
-    return points == other.points && cellLabels == other.cellLabels && cells == other.cells && brainLabels == other.brainLabels &&
-           parameters == other.parameters;
+    return points == other.points && cellLabels == other.cellLabels && cells == other.cells &&
+           membraneFields(parameters) == membraneFields(other.parameters);
   }
 };
 
-SurfaceMembraneKey surfaceMembraneKeyOf(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const ActiveSurfaceParameters& p)
+SurfaceMembraneKey surfaceMembraneKeyOf(vtkUnstructuredGrid* mesh, vtkDataArray* cellLabels, const ActiveSurfaceParameters& read)
 {
   SurfaceMembraneKey key;
   key.points.resize(3 * std::size_t(mesh->GetNumberOfPoints()));
@@ -1559,8 +1563,7 @@ SurfaceMembraneKey surfaceMembraneKeyOf(vtkUnstructuredGrid* mesh, vtkDataArray*
     for (vtkIdType k = 0; k < ids->GetNumberOfIds(); ++k) key.cells.push_back(ids->GetId(k));
     key.cellLabels.push_back(c < cellLabels->GetNumberOfTuples() ? cellLabels->GetComponent(c, 0) : std::nan(""));
   }
-  key.brainLabels = p.brainLabels;
-  key.parameters = {double(p.tumourLabel), p.timeStep, p.membraneWeight, p.bendingWeight};
+  key.parameters = read;
   return key;
 }
 

@@ -291,7 +291,8 @@ TemporaryFolder workFolderFor(const FiniteElementRunOptions& options)
     try {
       folder.path = cleanup::makeTemporaryFolder("/tmp/brainshift-fe-XXXXXX"); // registered as it is made
     } catch (const std::system_error& e) {
-      throw MethodError(std::string("cannot create a work folder: ") + e.code().message());
+      throw MethodError(std::string("cannot create the finite element worker's folder in /tmp: ") + e.code().message() +
+                        " (disk full or /tmp not writable?)");
     }
     folder.owned = true;
   } else {

@@ -194,9 +194,10 @@ IntensityRemap learnRemap(const Volume<float>& preop, const Volume<float>& intra
   return remap;
 }
 
-/// A source block: zero-mean values and their norm.
+/// A source block: zero-mean values (each rounded to float, held as a double for the products) and
+/// their norm.
 struct SourceBlock {
-  std::vector<float> values;
+  std::vector<double> values;
   double norm = 0;
 };
 
@@ -212,9 +213,9 @@ SourceBlock sourceBlock(const Volume<float>& image, int ci, int cj, int ck, int 
       }
   const double mean = sum / double(block.values.size());
   double squares = 0;
-  for (float& v : block.values) {
-    v = float(v - mean);
-    squares += double(v) * v;
+  for (double& v : block.values) {
+    v = double(float(v - mean));
+    squares += v * v;
   }
   block.norm = std::sqrt(squares);
   return block;
@@ -282,10 +283,9 @@ public:
         }
   }
 
-  /// The correlation of `source` (its values as doubles in `sourceValues`) at each of `count`
-  /// offsets (each within the radius): -2 where the window leaves the volume or is flat.
-  void correlations(const SourceBlock& source, const std::vector<double>& sourceValues, const std::array<int, 3>* offsets,
-                    std::size_t count, double* scores) const
+  /// The correlation of `source` at each of `count` offsets (each within the radius): -2 where the
+  /// window leaves the volume or is flat.
+  void correlations(const SourceBlock& source, const std::array<int, 3>* offsets, std::size_t count, double* scores) const
   {
     constexpr std::size_t Lanes = 4;
     for (std::size_t first = 0; first < count; first += Lanes) {
@@ -301,7 +301,7 @@ public:
       for (int z = 0; z < b; ++z)
         for (int y = 0; y < b; ++y, n += std::size_t(b)) {
           const std::size_t row = std::size_t(width_) * (std::size_t(y) + std::size_t(width_) * std::size_t(z));
-          const double* s = &sourceValues[n];
+          const double* s = &source.values[n];
           for (int x = 0; x < b; ++x) {
             const double a = s[x];
             for (std::size_t m = 0; m < Lanes; ++m) product[m] += a * corner[m][row + std::size_t(x)];
@@ -397,6 +397,48 @@ struct MatchingContext {
 
 bool isBrain(const std::vector<int>& labels, LabelPixel label) { return std::find(labels.begin(), labels.end(), int(label)) != labels.end(); }
 
+/// The best offset of a block's search and its correlation.
+struct SearchPeak {
+  std::array<int, 3> offset{0, 0, 0};
+  double score = -3;
+};
+
+/// A coarse pass over the window (every `coarseStep` voxels), then a hill-climb at one voxel
+/// around the peak until it stays; offsets are scored in lanes but taken in the loops' order, so a
+/// tie goes to the first as it always did.
+SearchPeak searchPeak(const SearchWindow& window, const SourceBlock& source, int radius, int coarseStep)
+{
+  SearchPeak peak;
+  std::vector<std::array<int, 3>> offsets;
+  std::vector<double> scores;
+  auto takeBest = [&] {
+    scores.resize(offsets.size());
+    window.correlations(source, offsets.data(), offsets.size(), scores.data());
+    for (std::size_t o = 0; o < offsets.size(); ++o) {
+      if (scores[o] > peak.score) peak = {offsets[o], scores[o]};
+    }
+  };
+  const int coarseReach = radius / coarseStep * coarseStep;
+  for (int z = -coarseReach; z <= coarseReach; z += coarseStep)
+    for (int y = -coarseReach; y <= coarseReach; y += coarseStep)
+      for (int x = -coarseReach; x <= coarseReach; x += coarseStep) offsets.push_back({x, y, z});
+  takeBest();
+  for (int pass = 0; pass < 4; ++pass) {
+    const std::array<int, 3> around = peak.offset;
+    const int reach = pass == 0 ? coarseStep - 1 : 1;
+    offsets.clear();
+    for (int z = -reach; z <= reach; ++z)
+      for (int y = -reach; y <= reach; ++y)
+        for (int x = -reach; x <= reach; ++x) {
+          const std::array<int, 3> o{around[0] + x, around[1] + y, around[2] + z};
+          if (std::abs(o[0]) <= radius && std::abs(o[1]) <= radius && std::abs(o[2]) <= radius) offsets.push_back(o);
+        }
+    takeBest();
+    if (peak.offset == around && pass > 0) break;
+  }
+  return peak;
+}
+
 Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, BlockMatch& match)
 {
   const SourceBlock source = sourceBlock(c.remappedPreop, centre[0], centre[1], centre[2], c.h);
@@ -407,48 +449,14 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, Blo
     start[std::size_t(a)] = centre[std::size_t(a)] + int(std::lround(offset));
   }
   const SearchWindow window(c.intraop, start, c.radius, c.h);
-  const std::vector<double> sourceValues(source.values.begin(), source.values.end());
-  std::vector<std::array<int, 3>> offsets;
-  std::vector<double> scores;
-  auto scoreAll = [&] {
-    scores.resize(offsets.size());
-    window.correlations(source, sourceValues, offsets.data(), offsets.size(), scores.data());
-  };
+  const SearchPeak peak = searchPeak(window, source, c.radius, c.coarseStep);
+  const std::array<int, 3>& best = peak.offset;
+  const double bestScore = peak.score;
   auto score = [&](const std::array<int, 3>& o) {
     double value = 0;
-    window.correlations(source, sourceValues, &o, 1, &value);
+    window.correlations(source, &o, 1, &value);
     return value;
   };
-  // Coarse pass over the window, then every voxel around the coarse peak; the offsets are taken in
-  // the order of the loops, so a tie goes to the first as it always did.
-  std::array<int, 3> best{0, 0, 0};
-  double bestScore = -3;
-  const int coarseReach = c.radius / c.coarseStep * c.coarseStep;
-  offsets.clear();
-  for (int z = -coarseReach; z <= coarseReach; z += c.coarseStep)
-    for (int y = -coarseReach; y <= coarseReach; y += c.coarseStep)
-      for (int x = -coarseReach; x <= coarseReach; x += c.coarseStep) offsets.push_back({x, y, z});
-  scoreAll();
-  for (std::size_t o = 0; o < offsets.size(); ++o) {
-    if (scores[o] > bestScore) { bestScore = scores[o]; best = offsets[o]; }
-  }
-  for (int pass = 0; pass < 4; ++pass) { // hill-climb at one voxel until the peak stays
-    const std::array<int, 3> around = best;
-    const int reach = pass == 0 ? c.coarseStep - 1 : 1;
-    offsets.clear();
-    for (int z = -reach; z <= reach; ++z)
-      for (int y = -reach; y <= reach; ++y)
-        for (int x = -reach; x <= reach; ++x) {
-          const std::array<int, 3> o{around[0] + x, around[1] + y, around[2] + z};
-          if (std::abs(o[0]) > c.radius || std::abs(o[1]) > c.radius || std::abs(o[2]) > c.radius) continue;
-          offsets.push_back(o);
-        }
-    scoreAll();
-    for (std::size_t o = 0; o < offsets.size(); ++o) {
-      if (scores[o] > bestScore) { bestScore = scores[o]; best = offsets[o]; }
-    }
-    if (best == around && pass > 0) break;
-  }
   match.similarity = bestScore;
   if (bestScore < c.parameters.minimumSimilarity) return Outcome::LowSimilarity;
   if (std::abs(best[0]) >= c.radius || std::abs(best[1]) >= c.radius || std::abs(best[2]) >= c.radius) return Outcome::AtSearchEdge;

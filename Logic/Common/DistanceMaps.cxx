@@ -135,9 +135,10 @@ MaskImage::Pointer voxelsAtLeastDeep(const MaskImage* mask, double depthMm)
 
 // Outside the mask the distance to its nearest boundary voxel is the distance to its nearest
 // voxel (which is a boundary voxel), so the selection is the voxels whose squared distance to the
-// nearest mask voxel is at most the reach's square (the mask itself at 0). The squared distance to the nearest mask voxel by the separable exact transform (along the rows,
-// then the columns, then the slices: the nearest along each axis of the nearest along the ones
-// before), each pass over the offsets within the reach alone. The sums run in the order the ball's
+// nearest mask voxel is at most the reach's square (the mask itself at 0). The squared distance to
+// the nearest mask voxel by the separable exact transform (along the rows, then the columns, then
+// the slices: the nearest along each axis of the nearest along the ones before), each pass over
+// the offsets within the reach alone. The sums run in the order the ball's
 // test adds them (dx^2 + dy^2, then + dz^2) and rounding is monotonic, so the minimum over the
 // passes is the smallest sum the ball's test would form: voxel for voxel the same selection as
 // splatting the closed ball from every mask voxel, at a few operations a voxel.

@@ -26,6 +26,7 @@
 #include <memory>
 #include <numeric>
 #include <stdexcept>
+#include <string>
 
 namespace brainshift {
 
@@ -387,7 +388,9 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
   std::vector<float> distance(n, std::numeric_limits<float>::infinity());
   // Each band voxel's place in band.w, set when its layer is done (read only where its distance
   // is finite): 4 bytes a voxel, uninitialised, where a dense copy of the corrections took 12, zeroed.
-  if (n >= std::size_t(std::numeric_limits<std::uint32_t>::max())) throw std::invalid_argument("warp: the grid is too large to continue the correction");
+  if (n >= std::size_t(std::numeric_limits<std::uint32_t>::max())) {
+    throw std::invalid_argument("warp: " + std::to_string(n) + " voxels on the intraoperative grid; the correction's continuation takes fewer than 2^32");
+  }
   const std::unique_ptr<std::uint32_t[]> slot(new std::uint32_t[n]);
   std::vector<unsigned char> queued(correction.located);
   for (std::size_t at = 0; at < n; ++at) {
