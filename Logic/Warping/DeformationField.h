@@ -8,12 +8,12 @@
 // holds it, and its barycentric coordinates there give X = sum lambda_k X_k. Outside the deformed
 // mesh the non-rigid correction X - p fades smoothly to zero (a normalised Gaussian extension of the
 // correction from the mesh, about `fallbackSigmaMm` wide), so far from the brain the mapping is the
-// rigid one. Next to the mesh the correction first continues across the brain's boundary (each
-// voxel takes its neighbours' inside the mesh) and blends into the fade over a band: the boundary
-// the update shows is the deformed mesh's, not pulled back towards the preoperative one by the
-// fade's average of the corrections deeper inside (where the brain sank under a craniotomy, the gap
-// above it shows the preoperative space above the brain, not brain). The Jacobian determinant of
-// y -> x flags folding (<= 0).
+// rigid one. Next to the mesh the correction first continues across the brain's boundary (in
+// order of distance from the mesh, each voxel takes its nearer neighbours') and blends into the
+// fade over a band: the boundary the update shows is the deformed mesh's, not pulled back towards
+// the preoperative one by the fade's average of the corrections deeper inside (where the brain sank
+// under a craniotomy, the gap above it shows the preoperative space above the brain, not brain).
+// The Jacobian determinant of y -> x flags folding (<= 0).
 #include "BrainShiftErrors.h"
 #include "ImageTypes.h"
 #include "TransformIO.h"

@@ -4,13 +4,16 @@
 // so the boundary the warped labels show is the deformed face (within half a millimetre). The fade
 // alone (continuationMaximumMm 0) averages the smaller corrections deeper inside and shows the
 // boundary more than a millimetre too high: the failure the continuation fixes. Neither folds; a
-// band too narrow for the sink folds outside the mesh only, and the folds are counted apart.
+// band too narrow for the sink folds outside the mesh only, and the folds are counted apart. In a
+// trench whose walls sank above a floor that did not, the continuation takes the walls'
+// correction, nearer in millimetres, not the floor's, nearer in steps across thick slices.
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "DeformationField.h"
 #include "SyntheticData.h"
 
 #include <itkIdentityTransform.h>
+#include <itkImageRegionConstIteratorWithIndex.h>
 #include <itkImageRegionIteratorWithIndex.h>
 #include <vtkDoubleArray.h>
 #include <vtkPointData.h>
@@ -18,6 +21,7 @@
 #include <vtkSmartPointer.h>
 #include <vtkUnstructuredGrid.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 
@@ -28,8 +32,10 @@ using brainshift::testing::point;
 constexpr double BoxTop = 20.0, BoxBottom = -20.0;
 
 /// The box [-20, 20] mm squared by [bottom, 20] mm tall in cubes of 4 mm, each cut into the six
-/// tetrahedra about its diagonal (Kuhn): a conforming mesh with flat faces.
-vtkSmartPointer<vtkUnstructuredGrid> kuhnBox(double bottom)
+/// tetrahedra about its diagonal (Kuhn): a conforming mesh with flat faces. `trenchLayers` > 0
+/// leaves out the two columns of cubes about x = 0 in that many top layers: a trench 8 mm wide
+/// along y.
+vtkSmartPointer<vtkUnstructuredGrid> kuhnBox(double bottom, int trenchLayers = 0)
 {
   constexpr int cells = 10;
   constexpr double step = (BoxTop - BoxBottom) / cells;
@@ -44,7 +50,8 @@ vtkSmartPointer<vtkUnstructuredGrid> kuhnBox(double bottom)
   const int orders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   for (int k = 0; k < layers; ++k)
     for (int j = 0; j < cells; ++j)
-      for (int i = 0; i < cells; ++i)
+      for (int i = 0; i < cells; ++i) {
+        if (k >= layers - trenchLayers && (i == cells / 2 - 1 || i == cells / 2)) continue;
         for (const auto& order : orders) {
           int corner[3] = {i, j, k};
           vtkIdType ids[4] = {node(i, j, k), 0, 0, 0};
@@ -54,24 +61,41 @@ vtkSmartPointer<vtkUnstructuredGrid> kuhnBox(double bottom)
           }
           mesh->InsertNextCell(VTK_TETRA, 4, ids);
         }
+      }
   return mesh;
 }
 
-/// The box from `bottom` up whose top sinks `sinkMm` while its bottom stays (u_z falling linearly with depth).
-vtkSmartPointer<vtkUnstructuredGrid> sinkingBox(double sinkMm, double bottom = BoxBottom)
+/// `mesh` with the point array "Displacement": a sink u_z = -sinkOf(z) at each node's height z.
+template <typename SinkOf>
+vtkSmartPointer<vtkUnstructuredGrid> sinking(vtkSmartPointer<vtkUnstructuredGrid> mesh, SinkOf&& sinkOf)
 {
-  const vtkSmartPointer<vtkUnstructuredGrid> mesh = kuhnBox(bottom);
   vtkNew<vtkDoubleArray> displacement;
   displacement->SetName("Displacement");
   displacement->SetNumberOfComponents(3);
   for (vtkIdType i = 0; i < mesh->GetNumberOfPoints(); ++i) {
     double x[3];
     mesh->GetPoint(i, x);
-    const double u[3] = {0.0, 0.0, -sinkMm * (x[2] - bottom) / (BoxTop - bottom)};
+    const double u[3] = {0.0, 0.0, -sinkOf(x[2])};
     displacement->InsertNextTuple(u);
   }
   mesh->GetPointData()->AddArray(displacement);
   return mesh;
+}
+
+constexpr double TrenchFloor = 8.0; ///< three 4 mm layers below BoxTop
+
+/// The box with the trench, whose tissue above the trench's floor sinks the more the higher it
+/// lies (its top by `sinkMm`), the floor and all below it not at all.
+vtkSmartPointer<vtkUnstructuredGrid> trenchedBox(double sinkMm)
+{
+  return sinking(kuhnBox(BoxBottom, 3),
+                 [sinkMm](double z) { return sinkMm * std::max(0.0, z - TrenchFloor) / (BoxTop - TrenchFloor); });
+}
+
+/// The box from `bottom` up whose top sinks `sinkMm` while its bottom stays (u_z falling linearly with depth).
+vtkSmartPointer<vtkUnstructuredGrid> sinkingBox(double sinkMm, double bottom = BoxBottom)
+{
+  return sinking(kuhnBox(bottom), [sinkMm, bottom](double z) { return sinkMm * (z - bottom) / (BoxTop - bottom); });
 }
 
 /// The height where the field shows the preoperative top face (X_z = BoxTop), along the column of
@@ -168,6 +192,39 @@ int DeformationFieldBoundaryTest(int, char*[])
     BS_CHECK(deep.continuationBandMm > 20.0 && deep.continuationBandMm <= 30.0);
     BS_CHECK_MSG(deep.foldedVoxels == 0, deep.foldedVoxels << " folded");
     BS_CHECK_MSG(capped.foldedVoxels > 0, "a 15 mm band no longer folds a 20 mm sink: the test no longer tells");
+    // The continuation takes the nearest tissue's correction in millimetres, not in steps. In a
+    // trench 8 mm wide whose walls sank (their top by 3 mm) above a floor that did not, on slices
+    // 2.5 mm thick and 0.5 mm in plane, a voxel in the trench's middle lies 4 mm (8 steps) from
+    // the walls and 5-8 mm (2-3 steps) above the floor: counted in steps it took the floor's
+    // correction (none), and the warped volumes showed preoperative tissue in the trench.
+    constexpr double trenchSinkMm = 3.0;
+    const vtkSmartPointer<vtkUnstructuredGrid> trenched = trenchedBox(trenchSinkMm);
+    const ImageGeometry fineGrid = brainshift::testing::grid({{60, 60, 24}}, {0.5, 0.5, 2.5}, point(-14.75, -14.75, -29.5));
+    DeformationFieldParameters wideBand; // the band's blend into the fade kept small (t <= 1.5 / 30)
+    wideBand.continuationMinimumMm = 30.0;
+    const DeformationField trench = intraopToPreopField(trenched, *identity, fineGrid, wideBand, "mesh.vtu");
+    const double sinkShare = trenchSinkMm / (BoxTop - TrenchFloor);
+    double worstShare = 1, sumShare = 0;
+    std::size_t trenchVoxels = 0;
+    for (itk::ImageRegionConstIteratorWithIndex<DisplacementFieldImage> it(trench.field, trench.field->GetLargestPossibleRegion());
+         !it.IsAtEnd(); ++it) {
+      PhysicalPoint y;
+      trench.field->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+      if (std::abs(y[0]) > 3.0 || std::abs(y[1]) > 10.0 || y[2] < TrenchFloor + 4.5 || y[2] > BoxTop - trenchSinkMm - 0.5) continue;
+      // The walls' correction at this height: the preoperative X whose deformed place is y_z,
+      // X - sinkShare (X - floor) = y_z.
+      const double wall = (y[2] - sinkShare * TrenchFloor) / (1.0 - sinkShare) - y[2];
+      const double share = it.Get()[2] / wall;
+      worstShare = std::min(worstShare, share);
+      sumShare += share;
+      ++trenchVoxels;
+    }
+    BS_CHECK_MSG(trenchVoxels > 200, trenchVoxels << " voxels in the trench");
+    std::cout << "trench: the continued correction " << sumShare / double(trenchVoxels) << " of the walls' on average, "
+              << worstShare << " at least, over " << trenchVoxels << " voxels\n";
+    BS_CHECK_MSG(worstShare > 0.75 && sumShare / double(trenchVoxels) > 0.85,
+                 "in the trench the continuation gives " << worstShare << " of the walls' correction (mean "
+                                                         << sumShare / double(trenchVoxels) << "): the floor's, nearer in steps");
     DeformationFieldParameters absurd;
     absurd.continuationMaximumCompression = 0;
     BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "continuation");
