@@ -87,3 +87,16 @@ def save_atomically(fig, path):
     fig.savefig(temporary, dpi=100)
     plt.close(fig)
     os.replace(temporary, path)
+
+
+MARGIN_GROUPS = ("tumour-margin", "near-cavity")  # the tumour's margin: in place, or the resection cavity's
+
+
+def group_mean(tre, names):
+    """The mean error (mm) of the first of the landmark groups `names` that an evaluation's TRE
+    (`brainshift evaluate --json`'s object, or evaluation.json's per transform) has; None when none."""
+    for name in names:
+        group = (tre or {}).get("groups", {}).get(name)
+        if group:
+            return group["mean_mm"]
+    return None

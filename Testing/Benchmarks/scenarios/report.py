@@ -30,8 +30,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+from benchmark_common import MARGIN_GROUPS, group_mean  # noqa: E402
+
 VARIANT_NAMES = {"once": "BrainShift (default)", "refined": "BrainShift, refine 2 passes"}
-MARGIN_GROUPS = ("tumour-margin", "near-cavity")  # the tumour's margin: in place, or the resection cavity's
 TARGET_MEAN, TARGET_P95, TARGET_GROUP = 1.0, 2.0, 1.5
 TARGET_BOUNDARY = 1.0  # the brain boundary under the craniotomy, mean |d| (issue #15)
 METHOD_ORDER = ["rigid (BrainShift)", "BrainShift (default)", "BrainShift, once, the update set aside",
@@ -45,14 +47,6 @@ def load(path):
             return json.load(f)
     except (OSError, ValueError):
         return None
-
-
-def group_mean(tre, names):
-    for name in names:
-        g = (tre or {}).get("groups", {}).get(name)
-        if g:
-            return g["mean_mm"]
-    return None
 
 
 def row_of(scenario, method, tre, case, seconds=None, extra=None):
