@@ -392,17 +392,15 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
   if (n >= std::size_t(std::numeric_limits<std::uint32_t>::max())) {
     throw std::invalid_argument("warp: " + std::to_string(n) + " voxels on the intraoperative grid; the correction's continuation takes fewer than 2^32");
   }
-  // Distances are exact on the grid's steps; they are taken shell by shell, each as thick as the
-  // shortest step, so a voxel's nearer neighbours all lie in earlier shells and its own shell
-  // changes none of its members' distances.
+  // The band is taken shell by shell, each as thick as the shortest step: a voxel offered from a
+  // shell goes into a later one (whatever its distance rounds to: float(0.7) < 0.7), and its mean
+  // reads the voxels of earlier shells alone (Done), never its own shell's (InShell).
   const double shellMm = std::min({grid.spacing[0], grid.spacing[1], grid.spacing[2]});
-  const std::size_t shells = std::size_t(reachMm / shellMm) + 1;
-  auto shellOf = [&](float distanceMm) { return std::size_t(double(distanceMm) / shellMm); };
   std::vector<float> distance(n, std::numeric_limits<float>::infinity());
   // Each band voxel's place in band.w, set when its shell is done (read only for done voxels):
   // 4 bytes a voxel, uninitialised, where a dense copy of the corrections took 12, zeroed.
   const std::unique_ptr<std::uint32_t[]> slot(new std::uint32_t[n]);
-  enum : unsigned char { Unreached = 0, Reached = 1, Done = 2 };
+  enum : unsigned char { Unreached = 0, Reached = 1, InShell = 2, Done = 3 };
   std::vector<unsigned char> state(n, Unreached);
   const long steps[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   auto forNeighbours = [&](std::size_t at, auto&& visit) {
@@ -414,12 +412,15 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
       visit(lattice.offset(a, b, c), grid.spacing[unsigned(s / 2)]);
     }
   };
-  std::vector<std::vector<std::uint32_t>> shell(shells);
+  std::vector<std::vector<std::uint32_t>> shell(std::size_t(reachMm / shellMm) + 2);
+  std::size_t current = 0; // the shell being taken; the mesh is shell 0
   auto offer = [&](std::size_t nb, double throughMm) { // a path to nb this long
-    if (state[nb] == Done || throughMm > reachMm || float(throughMm) >= distance[nb]) return;
+    if (state[nb] >= InShell || throughMm > reachMm || float(throughMm) >= distance[nb]) return;
     distance[nb] = float(throughMm);
     state[nb] = Reached;
-    shell[shellOf(distance[nb])].push_back(std::uint32_t(nb));
+    const std::size_t into = std::max(current + 1, std::size_t(double(distance[nb]) / shellMm));
+    if (into >= shell.size()) shell.resize(into + 1);
+    shell[into].push_back(std::uint32_t(nb));
   };
   for (std::size_t at = 0; at < n; ++at) {
     if (!correction.located[at]) continue;
@@ -430,37 +431,34 @@ Continuation continueCorrection(const VoxelCorrection& correction, const VoxelLa
     if (correction.located[at]) forNeighbours(at, [&](std::size_t nb, double step) { offer(nb, step); });
   }
   Continuation band;
-  std::vector<std::size_t> members;
-  for (std::size_t s = 0; s < shells; ++s) {
-    members.clear();
-    for (std::uint32_t at : shell[s]) { // once each, at the distance it kept
-      if (state[at] != Reached || shellOf(distance[at]) != s) continue;
-      state[at] = Done; // set before the means below read their neighbours: those of this shell are not nearer
-      members.push_back(at);
-    }
-    std::vector<std::uint32_t>().swap(shell[s]);
+  for (current = 1; current < shell.size(); ++current) {
     const std::size_t first = band.voxels.size();
-    for (std::size_t at : members) {
+    for (std::uint32_t at : shell[current]) { // once each: a voxel offered again nearer sits in an earlier shell too
+      if (state[at] != Reached) continue;
+      state[at] = InShell;
+      band.voxels.push_back(at);
+      band.distanceMm.push_back(distance[at]);
+    }
+    std::vector<std::uint32_t>().swap(shell[current]);
+    for (std::size_t b = first; b < band.voxels.size(); ++b) {
       double sum[3] = {0, 0, 0}, weights = 0;
-      forNeighbours(at, [&](std::size_t nb, double step) {
-        if (state[nb] != Done || shellOf(distance[nb]) >= s) return;
+      forNeighbours(band.voxels[b], [&](std::size_t nb, double step) {
+        if (state[nb] != Done) return;
         const float* w = correction.located[nb] ? &correction.w[3 * nb] : &band.w[3 * std::size_t(slot[nb])];
         const double weight = 1.0 / (step * step);
         for (int d = 0; d < 3; ++d) sum[d] += weight * w[d];
         weights += weight;
       });
-      if (weights == 0) { // not reached from a nearer shell after all (rounding): left to the fade
-        state[at] = Unreached;
-        distance[at] = std::numeric_limits<float>::infinity();
-        continue;
-      }
+      // Offered by a Done neighbour, so weights > 0.
       for (int d = 0; d < 3; ++d) band.w.push_back(float(sum[d] / weights));
-      band.voxels.push_back(at);
-      band.distanceMm.push_back(distance[at]);
     }
     for (std::size_t b = first; b < band.voxels.size(); ++b) {
       const std::size_t at = band.voxels[b];
       slot[at] = std::uint32_t(b);
+      state[at] = Done;
+    }
+    for (std::size_t b = first; b < band.voxels.size(); ++b) {
+      const std::size_t at = band.voxels[b];
       forNeighbours(at, [&](std::size_t nb, double step) { offer(nb, double(distance[at]) + step); });
     }
   }

@@ -77,6 +77,15 @@ require_brainshift() {
   [ -x "$brainshift" ] || die "$brainshift not found: build BrainShift first with scripts/build.sh"
 }
 
+# scenarios_or_all: the array `scenarios` as the caller named them, else every scenario
+# `brainshift demo --help` lists; stops the benchmark when there is none.
+scenarios_or_all() {
+  if [ ${#scenarios[@]} -eq 0 ]; then
+    mapfile -t scenarios < <("$brainshift" demo --help | sed -n 's/.*--scenario TEXT=default.*values): //p' | tr ',' '\n' | tr -d ' ')
+  fi
+  [ ${#scenarios[@]} -gt 0 ] || die "no scenario named and none listed by brainshift demo --help"
+}
+
 # --- the output folder --------------------------------------------------------------------------
 # prepare_output ENTRY...: creates out, makes it absolute, and removes the ENTRYs (names in out; a
 # folder written with a trailing /) left by an earlier run, whose results would mix with this one's.

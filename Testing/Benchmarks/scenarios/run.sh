@@ -33,10 +33,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 if [ "${ELASTIX:-0}" != 0 ]; then ensure_matplotlib elastix; else ensure_matplotlib; fi
 require_brainshift
-if [ ${#scenarios[@]} -eq 0 ]; then
-  mapfile -t scenarios < <("$brainshift" demo --help | sed -n 's/.*--scenario TEXT=default.*values): //p' | tr ',' '\n' | tr -d ' ')
-fi
-[ ${#scenarios[@]} -gt 0 ] || die "no scenario named and none listed by brainshift demo --help"
+scenarios_or_all
 # KEEP_ROWS=1: the rows of the scenarios.csv already in OUTPUT_DIR that this run does not give (other
 # variants, other scenarios, elastix) are kept in the new table (report.py --keep-rows).
 keep=()

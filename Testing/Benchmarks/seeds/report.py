@@ -10,6 +10,7 @@ whether every seed meets the targets of issue 15 (TRE mean <= 1.0 and p95 <= 2.0
 and tumour-margin groups <= 1.5 mm, the brain boundary under the craniotomy <= 1.0 mm both ways).
 """
 import csv
+import io
 import os
 import sys
 
@@ -55,12 +56,12 @@ def main():
                 rows.append(row_of(scenario, int(entry[len("seed-"):]), os.path.join(folder, entry)))
     if not rows:
         sys.exit(f"report.py: no runs in {runs}")
-    fields = list(rows[0].keys())
-    with open(os.path.join(out, "seeds.csv.tmp"), "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(os.path.join(out, "seeds.csv.tmp"), os.path.join(out, "seeds.csv"))
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=list(rows[0].keys()))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomically(os.path.join(out, "seeds.csv"), table.getvalue())
+    failed = [f"{r['scenario']} seed {r['seed']}" for r in rows if finite(r["tre_mean_mm"]) is None]
 
     seeds = sorted({r["seed"] for r in rows})
     scenarios = sorted({r["scenario"] for r in rows}, key=lambda s: (s != "default", s))
@@ -85,8 +86,11 @@ def main():
         all_met += met
         cells.append("yes" if met else "no")
         lines.append(table_row(cells))
-    lines += ["", f"Every seed meets every target on {all_met} of {len(scenarios)} scenarios.", "",
-              *machine_section(out)]
+    lines += ["", f"Every seed meets every target on {all_met} of {len(scenarios)} scenarios."]
+    if failed:  # a run without an evaluation is a failure of the run, not an accuracy: named, with where to look
+        lines += ["", f"Runs without an evaluation (counted as not meeting the targets; see runs/<scenario>/seed-<N>/demo.log): "
+                  f"{', '.join(failed)}."]
+    lines += ["", *machine_section(out)]
     write_atomically(os.path.join(out, "summary.md"), "\n".join(lines) + "\n")
 
 

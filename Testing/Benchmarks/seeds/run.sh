@@ -25,10 +25,7 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 ensure_matplotlib # report.py imports benchmark_common.py, which needs it
 require_brainshift
-if [ ${#scenarios[@]} -eq 0 ]; then
-  mapfile -t scenarios < <("$brainshift" demo --help | sed -n 's/.*--scenario TEXT=default.*values): //p' | tr ',' '\n' | tr -d ' ')
-fi
-[ ${#scenarios[@]} -gt 0 ] || die "no scenario named and none listed by brainshift demo --help"
+scenarios_or_all
 for seed in "${seeds[@]}"; do
   [[ $seed =~ ^[0-9]+$ ]] || die "SEEDS: '$seed' is not a whole number"
 done

@@ -6,7 +6,8 @@
 // boundary more than a millimetre too high: the failure the continuation fixes. Neither folds; a
 // band too narrow for the sink folds outside the mesh only, and the folds are counted apart. In a
 // trench whose walls sank above a floor that did not, the continuation takes the walls'
-// correction, nearer in millimetres, not the floor's, nearer in steps across thick slices.
+// correction, nearer in millimetres, not the floor's, nearer in steps across thick slices; and on
+// spacings no float holds exactly the voxels next to the mesh are continued too.
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
 #include "DeformationField.h"
@@ -96,6 +97,13 @@ vtkSmartPointer<vtkUnstructuredGrid> trenchedBox(double sinkMm)
 vtkSmartPointer<vtkUnstructuredGrid> sinkingBox(double sinkMm, double bottom = BoxBottom)
 {
   return sinking(kuhnBox(bottom), [sinkMm, bottom](double z) { return sinkMm * (z - bottom) / (BoxTop - bottom); });
+}
+
+/// The correction x_z - y_z that tissue sinking by `share` of its height above `still` shows at the
+/// deformed height y_z: the preoperative x_z with x_z - share (x_z - still) = y_z.
+double sinkCorrectionAt(double yz, double share, double still)
+{
+  return (yz - share * still) / (1.0 - share) - yz;
 }
 
 /// The height where the field shows the preoperative top face (X_z = BoxTop), along the column of
@@ -211,9 +219,7 @@ int DeformationFieldBoundaryTest(int, char*[])
       PhysicalPoint y;
       trench.field->TransformIndexToPhysicalPoint(it.GetIndex(), y);
       if (std::abs(y[0]) > 3.0 || std::abs(y[1]) > 10.0 || y[2] < TrenchFloor + 4.5 || y[2] > BoxTop - trenchSinkMm - 0.5) continue;
-      // The walls' correction at this height: the preoperative X whose deformed place is y_z,
-      // X - sinkShare (X - floor) = y_z.
-      const double wall = (y[2] - sinkShare * TrenchFloor) / (1.0 - sinkShare) - y[2];
+      const double wall = sinkCorrectionAt(y[2], sinkShare, TrenchFloor); // the walls' at this height
       const double share = it.Get()[2] / wall;
       worstShare = std::min(worstShare, share);
       sumShare += share;
@@ -225,6 +231,33 @@ int DeformationFieldBoundaryTest(int, char*[])
     BS_CHECK_MSG(worstShare > 0.75 && sumShare / double(trenchVoxels) > 0.85,
                  "in the trench the continuation gives " << worstShare << " of the walls' correction (mean "
                                                          << sumShare / double(trenchVoxels) << "): the floor's, nearer in steps");
+    // Spacings no float holds exactly (0.7 mm: float(0.7) < 0.7) take the same path: every voxel
+    // next to the mesh is continued, none is left to the fade by a distance rounded down a shell.
+    const ImageGeometry oddGrid = brainshift::testing::grid({{84, 84, 26}}, {0.7, 0.7, 2.3}, point(-29.05, -29.05, -29.9));
+    const DeformationField odd = intraopToPreopField(mesh, *identity, oddGrid, {}, "mesh.vtu");
+    double worstOdd = 0, meanOdd = 0;
+    measureTopFace(odd, 6.0, worstOdd, meanOdd);
+    std::cout << "0.7 x 0.7 x 2.3 mm voxels: shown top face worst " << worstOdd << " mm (" << odd.continuedVoxels
+              << " voxels continued)\n";
+    BS_CHECK_MSG(worstOdd < 0.5, "on 0.7 mm voxels the face is shown " << worstOdd << " mm off");
+    // Beside the box's side walls (|x| just over 20 mm) the wall's correction continues: the first
+    // in-plane layer, 0.7 mm out, is a step of the shortest spacing from the mesh.
+    double sideShare = 0;
+    std::size_t sideVoxels = 0;
+    for (itk::ImageRegionConstIteratorWithIndex<DisplacementFieldImage> it(odd.field, odd.field->GetLargestPossibleRegion()); !it.IsAtEnd();
+         ++it) {
+      PhysicalPoint y;
+      odd.field->TransformIndexToPhysicalPoint(it.GetIndex(), y);
+      if (std::abs(y[0]) <= BoxTop || std::abs(y[0]) > BoxTop + 0.7 || std::abs(y[1]) > 10.0 || y[2] < -10.0 || y[2] > 8.0) continue;
+      const double wall = sinkCorrectionAt(y[2], 6.0 / (BoxTop - BoxBottom), BoxBottom); // the walls' at this height
+      sideShare += it.Get()[2] / wall;
+      ++sideVoxels;
+    }
+    BS_CHECK_MSG(sideVoxels > 100, sideVoxels << " voxels beside the walls");
+    std::cout << "beside the walls on 0.7 mm voxels: " << sideShare / double(sideVoxels) << " of the walls' correction over "
+              << sideVoxels << " voxels\n";
+    BS_CHECK_MSG(sideShare / double(sideVoxels) > 0.95, "beside the walls the continuation gives " << sideShare / double(sideVoxels)
+                                                                                                   << " of the walls' correction");
     DeformationFieldParameters absurd;
     absurd.continuationMaximumCompression = 0;
     BS_CHECK_THROWS(intraopToPreopField(mesh, *identity, grid, absurd, "mesh.vtu"), InputError, "continuation");
