@@ -1270,6 +1270,22 @@ void warnOfResectionByImage(TissueClassificationResult& result)
   result.warnings.push_back(w.str());
 }
 
+/// Where the fluid is brighter than the parenchyma (T2), the fluid pooled under a craniotomy looks
+/// like the cortex beneath it: CSF in the sulci makes the cortex's first millimetres as bright
+/// (rf10-t2, under the craniotomy: the gap's fluid 654 median, the true brain's outer 3 mm 577,
+/// its 90th percentile 874). Neither intensity nor the spatial prior (the fluid fills where the
+/// brain was) tells them apart, and the brain is drawn up to the fluid's surface. Said, with what
+/// it cost on the built-in T2 scenarios, since the confidence map does not see it.
+void warnOfFluidLikeCortex(TissueClassificationResult& result)
+{
+  if (!result.contrast.fluidBrighterThanParenchyma()) return;
+  result.warnings.push_back(
+    "classify: this scan's fluid is brighter than its parenchyma (T2-like), and fluid pooled under the craniotomy looks like "
+    "the cortex beneath it: the brain's boundary there may be drawn at the fluid's surface, above the sunken brain (on the "
+    "built-in T2 scenarios 1.5-1.6 mm mean, p95 4.1 mm, where the other contrasts give at most 1.0), and the confidence map does "
+    "not show it; check the brain's boundary under the craniotomy on the scan");
+}
+
 } // namespace
 
 TissueClassificationResult classifyTissues(const ScalarImage& intraop, const LabelImage& preopLabels,
@@ -1302,6 +1318,7 @@ TissueClassificationResult classifyTissues(const ScalarImage& intraop, const Lab
   cleanUpBrain(work, result);
   result.cleanupSeconds = secondsSince(cleanupStart);
   warnOfResectionByImage(result);
+  warnOfFluidLikeCortex(result);
   return result;
 }
 

@@ -28,7 +28,7 @@ source "$here/../common.sh"
 out=${1:-$root/Testing/Benchmarks/results/scenarios}
 if [ $# -gt 0 ]; then shift; fi
 scenarios=("$@")
-variants=(${VARIANTS:-once refined true-labels})
+read -r -a variants <<< "${VARIANTS:-once refined true-labels}"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 if [ "${ELASTIX:-0}" != 0 ]; then ensure_matplotlib elastix; else ensure_matplotlib; fi

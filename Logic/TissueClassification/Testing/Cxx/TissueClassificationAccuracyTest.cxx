@@ -22,6 +22,8 @@ int TissueClassificationAccuracyTest(int, char*[])
       BS_CHECK_MSG(s.ventricles >= 0.55, s.ventricles);
       BS_CHECK(result.tumourResected);
       BS_CHECK(!result.prototypesPerClass.count(4));
+      // A T1 scan's fluid is dark: no warning of fluid that looks like the cortex.
+      for (const std::string& w : result.warnings) BS_CHECK_MSG(w.find("brighter than its parenchyma") == std::string::npos, w);
       // The cavity is outside the brain: where the truth has the cavity, the result has no brain.
       std::size_t cavity = 0, cavityCalledBrain = 0;
       const LabelPixel* truth = c.simulated.intraopLabels->GetBufferPointer();
