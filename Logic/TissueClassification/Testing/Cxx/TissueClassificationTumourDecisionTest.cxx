@@ -57,7 +57,16 @@ int TissueClassificationTumourDecisionTest(int, char*[])
     BS_CHECK(!resectionShownWhereSolved(littleAir));
     BS_CHECK(resectionShownWhereSolved(someAir));
     BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{68.0f, 97}, {2.0f, 3}}), scan, 1.0, TumourResection::Auto)));
-    // A hypointense tumour (0.4 of the way to the parenchyma) in place, with a little air beside it.
+    // A tumour that looked like the parenchyma, with air: a cavity, though under the first look's
+    // 35 % of fluid (the small hard scenario's 27.5 % and 5.8 % of air, CommandLine.HardScenario):
+    // its vote cannot tell it from the tissue that sank into its place, the air decides.
+    const TumourResectionEvidence thirdFluid = tumourResectionEvidenceOf(voxels({{21.0f, 22}, {2.0f, 6}, {70.0f, 72}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK(!decideTumourResection(thirdFluid, TumourResection::Auto));
+    BS_CHECK_MSG(std::abs(thirdFluid.fluidLikeShare - 0.28) < 1e-9 && std::abs(thirdFluid.airLikeShare - 0.06) < 1e-9, thirdFluid.fluidLikeShare);
+    BS_CHECK(resectionShownWhereSolved(thirdFluid));
+    // A hypointense tumour (0.4 of the way to the parenchyma) in place, with a little air beside it:
+    // its own look, which most of it keeps, holds it (the air alone decides only for tumours that
+    // looked like the parenchyma).
     const TumourResectionEvidence hypointense =
       tumourResectionEvidenceOf(voxels({{40.0f, 90}, {2.0f, 10}}), scan, 0.4, TumourResection::Auto);
     BS_CHECK_MSG(std::abs(hypointense.tumourLikeShare - 0.9) < 1e-9, hypointense.tumourLikeShare);
