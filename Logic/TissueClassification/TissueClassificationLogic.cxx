@@ -387,6 +387,21 @@ itk::Image<unsigned, 3>::Pointer components(const MaskImage* mask, bool sortBySi
   return relabel->GetOutput();
 }
 
+/// The tumour's place before surgery between the fluid (0) and the parenchyma (1); without it,
+/// the parenchyma's.
+double lookBeforeSurgery(const TumourResectionEvidence& e)
+{
+  return std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
+}
+
+/// A tumour that looked like the parenchyma before surgery (enhancing, isointense): within a
+/// quarter of the way from it. Its voxels cannot be told from the tissue the rigid prior, or a sink,
+/// put in its place.
+bool lookedLikeParenchyma(const TumourResectionEvidence& e)
+{
+  return std::abs(1.0 - lookBeforeSurgery(e)) < 0.25;
+}
+
 } // namespace
 
 /// Each of the tumour's intensities votes for what it looks like most: fluid, the tumour as it
@@ -407,8 +422,7 @@ TumourResectionEvidence tumourResectionEvidenceOf(const std::vector<float>& tumo
   e.decidedBy = told == TumourResection::Auto ? "image" : "user";
   e.voxels = tumourIntensities.size();
   if (std::isfinite(span) && std::abs(span) > 1e-6) {
-    const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
-    const double expected = e.fluidMedian + before * span;
+    const double expected = e.fluidMedian + lookBeforeSurgery(e) * span;
     std::size_t fluid = 0, air = 0, tumour = 0, parenchyma = 0;
     for (float v : tumourIntensities) {
       // Air counts with the fluid (the cavity's upper part); in T1 it is nearer the fluid anyway.
@@ -442,7 +456,7 @@ bool decideTumourResection(const TumourResectionEvidence& e, TumourResection tol
 {
   if (told != TumourResection::Auto) return told == TumourResection::Resected;
   if (!std::isfinite(e.intraopRelative)) return false;
-  const double before = std::isfinite(e.preopRelative) ? e.preopRelative : 1.0;
+  const double before = lookBeforeSurgery(e);
   if (e.fluidMedian > e.parenchymaMedian) {
     // Fluid brighter than the parenchyma (T2): the tumour's look before surgery (a T1) does not
     // carry over (most tumours are bright in T2, as fluid is). Air, dark in every contrast and in
@@ -453,9 +467,8 @@ bool decideTumourResection(const TumourResectionEvidence& e, TumourResection tol
     return before >= 0.15 && e.fluidLikeShare >= 0.5;
   }
   if (before < 0.15) return false;
-  // A tumour that looked like the parenchyma (enhancing, isointense) cannot be told from the
-  // tissue the rigid prior put in its place: a cavity shows as fluid in a good share of it.
-  if (std::abs(1.0 - before) < 0.25) return e.fluidLikeShare >= 0.35;
+  // A tumour that looked like the parenchyma: a cavity shows as fluid in a good share of it.
+  if (lookedLikeParenchyma(e)) return e.fluidLikeShare >= 0.35;
   return e.fluidLikeShare > e.tumourLikeShare;
 }
 
@@ -468,8 +481,7 @@ bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved)
   // apart here (measured where the first solve put the tumour, 144 runs of the scenarios: 34-81 %
   // fluid-like in resected tumours, rf15-cavityrim 35-36 %, the small case 27.5 %; up to 34 % in
   // tumours left in place). The air does (8.4-16.8 % against at most 2.2 %), and decides alone.
-  const double before = std::isfinite(whereSolved.preopRelative) ? whereSolved.preopRelative : 1.0;
-  if (whereSolved.fluidMedian < whereSolved.parenchymaMedian && std::abs(1.0 - before) < 0.25) return true;
+  if (whereSolved.fluidMedian < whereSolved.parenchymaMedian && lookedLikeParenchyma(whereSolved)) return true;
   // A tumour with its own look must also look more like fluid than like itself: one beside the
   // gap's air is kept.
   return decideTumourResection(whereSolved, TumourResection::Auto);
@@ -1321,15 +1333,16 @@ void warnOfResectionByImage(TissueClassificationResult& result)
 /// (rf10-t2, under the craniotomy: the gap's fluid 654 median, the true brain's outer 3 mm 577,
 /// its 90th percentile 874). Neither intensity nor the spatial prior (the fluid fills where the
 /// brain was) tells them apart, and the brain is drawn up to the fluid's surface. Said, with what
-/// it cost on the built-in T2 scenarios, since the confidence map does not see it.
+/// it costs on the built-in T2 scenarios (in round figures, which a rerun of the scenarios does not
+/// outdate: results/scenarios), since the confidence map does not see it.
 void warnOfFluidLikeCortex(TissueClassificationResult& result)
 {
   if (!result.contrast.fluidBrighterThanParenchyma()) return;
   result.warnings.push_back(
     "classify: this scan's fluid is brighter than its parenchyma (T2-like), and fluid pooled under the craniotomy looks like "
     "the cortex beneath it: the brain's boundary there may be drawn at the fluid's surface, above the sunken brain (on the "
-    "built-in T2 scenarios 1.1-1.2 mm mean, p95 3.1-3.4 mm, where the other contrasts give at most 0.9), and the confidence map does "
-    "not show it; check the brain's boundary under the craniotomy on the scan");
+    "built-in T2 scenarios more than 1 mm on average and 3-4 mm at the 95th percentile, where the other contrasts stay "
+    "within 1 mm), and the confidence map does not show it; check the brain's boundary under the craniotomy on the scan");
 }
 
 } // namespace

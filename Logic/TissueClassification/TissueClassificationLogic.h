@@ -99,18 +99,19 @@ TumourResectionEvidence tumourResectionEvidenceOf(const std::vector<float>& tumo
                                                   double preopRelative, TumourResection told);
 /// Resected or not, as the evidence says (or as `told`, when not Auto).
 bool decideTumourResection(const TumourResectionEvidence& evidence, TumourResection told);
-/// The evidence of the tumour's voxels where a solve put it, after a first classification found
-/// the tumour in place through the rigid prior. Under a large shift that prior's tumour site holds
-/// the parenchyma that sank into it; where the solve put the tumour, a cavity shows. Resected when
-/// air shows in it (5 %) and, for a tumour with its own look, the vote says so: a cavity under an open craniotomy holds air at its
-/// top, no tumour does, while a necrotic or cystic tumour's core looks like fluid (measured on the
-/// built-in scenarios, 144 runs: 8.4-16.8 % air where the tumour was resected, at most 2.2 % where it
-/// was not; fluid-like 34-81 % resected, up to 34 % in place, 49-51 % in T2). For a tumour that
-/// looked like the parenchyma the air decides alone: its vote cannot tell it from the tissue that sank
-/// into its place, and resected tumours only just reached the first look's 35 % of fluid
-/// (rf15-cavityrim 35 %, the small case 27.5 %). A tumour with its own look must also look more like
-/// fluid than like itself: one beside the gap's air is kept. A cavity filled with saline alone is not
-/// told from a cystic tumour: it stays in place unless the user says otherwise.
+/// The evidence of the tumour's voxels where a solve put it, after a first classification found the
+/// tumour in place through the rigid prior. Under a large shift that prior's tumour site holds the
+/// parenchyma that sank into it; where the solve put the tumour, a cavity shows. Resected when air
+/// shows in it (5 %) and, for a tumour with its own look, the vote says so: a cavity under an open
+/// craniotomy holds air at its top, no tumour does, while a necrotic or cystic tumour's core looks
+/// like fluid (measured on the built-in scenarios, 144 runs: 8.4-16.8 % air where the tumour was
+/// resected, at most 2.2 % where it was not; fluid-like 34-81 % resected, up to 34 % in place,
+/// 49-51 % in T2). For a tumour that looked like the parenchyma the air decides alone: its vote
+/// cannot tell it from the tissue that sank into its place, and resected tumours only just reached
+/// the first look's 35 % of fluid (rf15-cavityrim 35 %, the small case 27.5 %). A tumour with its
+/// own look must also look more like fluid than like itself: one beside the gap's air is kept. A
+/// cavity filled with saline alone is not told from a cystic tumour: it stays in place unless the
+/// user says otherwise.
 bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved);
 
 /// The intensity channel's 0-100 scale: 0 and 100 are these values of the intraoperative image
