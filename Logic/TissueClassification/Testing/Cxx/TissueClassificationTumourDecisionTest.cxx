@@ -32,9 +32,10 @@ int TissueClassificationTumourDecisionTest(int, char*[])
     using namespace brainshift;
     BS_CHECK(toString(tumourResectionFromString("yes")) == "yes");
     // Where a solve put the tumour (a scan of fluid 20, parenchyma 70, air 2 on the 0-100 scale; a
-    // tumour that looked like the parenchyma before surgery): resected when the vote says so and air
-    // shows in it. A necrotic tumour's fluid-like core alone, or a cavity of saline alone, is not
-    // enough: the two cannot be told apart by intensity.
+    // tumour that looked like the parenchyma before surgery): resected when air shows in it (5 %),
+    // which its vote cannot add to (the tissue that sank into its place looks as it did). A necrotic
+    // tumour's fluid-like core alone, or a cavity of saline alone, is not enough: the two cannot be
+    // told apart by intensity.
     const ScanContrast scan{2.0, 20.0, 70.0};
     auto voxels = [](std::initializer_list<std::pair<float, std::size_t>> parts) {
       std::vector<float> v;
@@ -49,7 +50,7 @@ int TissueClassificationTumourDecisionTest(int, char*[])
     BS_CHECK(decideTumourResection(necrotic, TumourResection::Auto)); // the vote alone would say resected
     BS_CHECK(!resectionShownWhereSolved(necrotic));
     BS_CHECK(!resectionShownWhereSolved(tumourResectionEvidenceOf(voxels({{20.0f, 100}}), scan, 1.0, TumourResection::Auto)));
-    // The air's bound: the vote says resected both times (40 % fluid or air); 3 % air is not a
+    // The air's bound (the vote says resected both times, 40 % fluid or air): 3 % air is not a
     // cavity's sign, 6 % is.
     const TumourResectionEvidence littleAir = tumourResectionEvidenceOf(voxels({{21.0f, 37}, {2.0f, 3}, {70.0f, 60}}), scan, 1.0, TumourResection::Auto);
     const TumourResectionEvidence someAir = tumourResectionEvidenceOf(voxels({{21.0f, 34}, {2.0f, 6}, {70.0f, 60}}), scan, 1.0, TumourResection::Auto);
