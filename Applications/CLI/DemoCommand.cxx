@@ -31,6 +31,7 @@ struct DemoOptions {
   double noise = 0.03, bias = 0.2;
   std::string scenario = "default";
   std::string contrast = "t1", tumour = "rim-enhancing", gap = "dark", truth = "kinematic";
+  double tumourDepth = 22.0;
   bool cavityRim = false;
   std::string fieldOfView = "whole-head";
   /// The options given on the command line (they override the scenario's values).
@@ -54,6 +55,7 @@ CaseParameterOverrides caseOverridesOf(const DemoOptions& o)
   if (given("--bias")) overrides.biasStrength = o.bias;
   if (given("--contrast")) overrides.contrast = intraopContrastFromString(o.contrast);
   if (given("--tumour")) overrides.tumourAppearance = tumourAppearanceFromString(o.tumour);
+  if (given("--tumour-depth")) overrides.tumourDepthMm = o.tumourDepth;
   if (given("--gap")) overrides.gap = gapContentFromString(o.gap);
   if (given("--cavity-rim")) overrides.cavityRim = o.cavityRim;
   if (given("--truth")) overrides.truth = truthModelFromString(o.truth);
@@ -85,6 +87,8 @@ void addCaseOptions(CLI::App* command, DemoOptions& o)
     ->capture_default_str();
   command->add_option("--contrast", o.contrast, "intraoperative contrast: t1, low-field-t1, t2, flair or t1-post-contrast")->capture_default_str();
   command->add_option("--tumour", o.tumour, "tumour look: rim-enhancing, hypointense or nearly-isointense")->capture_default_str();
+  command->add_option("--tumour-depth", o.tumourDepth,
+                      "the tumour's centre below the cortex at the craniotomy, mm (13: it reaches the cortex)")->capture_default_str();
   command->add_option("--gap", o.gap, "what fills the gap under the craniotomy: dark or fluid-and-air")->capture_default_str();
   command->add_flag("--cavity-rim", o.cavityRim, "a bright rim of blood products on the resection cavity's wall");
   command->add_option("--truth", o.truth,
@@ -241,7 +245,7 @@ void addDemoCommand(CLI::App& app)
   addRegisterOptions(command, options->run);
   command->callback([command, options] {
     for (const char* name : {"--seed", "--shift", "--craniotomy", "--no-resection", "--rotation", "--translation", "--noise",
-                             "--bias", "--contrast", "--tumour", "--gap", "--cavity-rim", "--truth", "--field-of-view"}) {
+                             "--bias", "--contrast", "--tumour", "--tumour-depth", "--gap", "--cavity-rim", "--truth", "--field-of-view"}) {
       if (command->count(name) > 0) options->given.insert(name);
     }
     runDemo(*options);

@@ -589,6 +589,8 @@ void CaseParameters::validate() const
           "the fluid fractions of the gap and the cavity must be within 0 to 1");
   require(std::isfinite(gravityTiltDegrees) && std::abs(gravityTiltDegrees) <= 60,
           "the gravity tilt must be within +-60 degrees");
+  require(std::isfinite(tumourDepthMm) && tumourDepthMm >= 13 && tumourDepthMm <= 40,
+          "--tumour-depth: " + std::to_string(tumourDepthMm) + " mm is outside 13 to 40 mm (the tumour's centre below the cortex)");
 }
 
 namespace {
@@ -639,6 +641,7 @@ const std::vector<CaseScenario>& caseScenarios()
       bool cavityRim;
       double noise, bias;
       std::uint64_t seed;
+      double tumourDepth = CaseParameters{}.tumourDepthMm;
     };
     using S = CraniotomySite;
     using T = TumourAppearance;
@@ -664,6 +667,10 @@ const std::vector<CaseScenario>& caseScenarios()
       {"rf10-t1post-intact", "right frontal, 10 mm, tumour in place, a T1 post-contrast intraoperative scan (enhancing tumour rim and dura)", S::RightFrontal, 10, false, T::RimEnhancing, C::T1PostContrast, false, 0.04, 0.2, 2118},
       {"rf10-t1post", "right frontal, 10 mm, resection, a T1 post-contrast intraoperative scan (enhancing cavity wall and dura)", S::RightFrontal, 10, true, T::RimEnhancing, C::T1PostContrast, false, 0.04, 0.2, 2119},
       {"rf10-t2-intact", "right frontal, 10 mm, tumour in place, a T2-weighted intraoperative scan", S::RightFrontal, 10, false, T::RimEnhancing, C::T2, false, 0.04, 0.2, 2120},
+      // A tumour reaching the cortex sinks with the brain: its place through the rigid prior holds
+      // the gap's fluid, and it looks resected there.
+      {"rf20-superficial-intact", "right frontal, 20 mm, nearly isointense tumour in place reaching the cortex, low-field", S::RightFrontal, 20, false, T::NearlyIsointense, C::LowFieldT1, false, 0.04, 0.2, 2121, 13.0},
+      {"lp15-fe-superficial-intact", "left parietal, 15 mm, nearly isointense tumour in place reaching the cortex; finite element truth (CalculiX, sliding brain surface)", S::LeftParietal, 15, false, T::NearlyIsointense, C::T1, false, 0.04, 0.2, 2122, 13.0},
     };
     std::vector<CaseScenario> list{{"default", "the built-in case: right frontal, 10 mm, resection, T1, a dark gap", CaseParameters{}}};
     for (const Variant& v : variants) {
@@ -677,6 +684,7 @@ const std::vector<CaseScenario>& caseScenarios()
       p.cavityRim = v.cavityRim;
       p.noiseFraction = v.noise;
       p.biasStrength = v.bias;
+      p.tumourDepthMm = v.tumourDepth;
       p.gap = GapContent::FluidAndAir; // every hard scenario: fluid under air in the gap and the cavity
       if (std::string(v.name).find("-fe-") != std::string::npos) p.truth = TruthModel::FiniteElementSliding;
       if (std::string(v.name) == "rp10-misaligned") {
@@ -942,8 +950,9 @@ struct Surgery {
   TumourShape tumour;
 };
 
-/// The craniotomy where the outward ray from the brain's centroid leaves the brain; the tumour 22 mm
-/// below it, with a T1 post-contrast look (hypointense core, enhancing rim).
+/// The craniotomy where the outward ray from the brain's centroid leaves the brain; the tumour
+/// P.tumourDepthMm below it (22 mm by default), with a T1 post-contrast look (hypointense core,
+/// enhancing rim).
 Surgery plannedSurgery(const CaseParameters& P, const Anatomy& a, std::mt19937_64& rng)
 {
   Surgery s;
@@ -955,7 +964,7 @@ Surgery plannedSurgery(const CaseParameters& P, const Anatomy& a, std::mt19937_6
     if (sampleNearest<unsigned char>(a.G, a.brain(), p, 0)) s.craniotomyCentre = p;
   }
   TumourShape& tumour = s.tumour;
-  tumour.centre = s.craniotomyCentre - 22.0 * axis;
+  tumour.centre = s.craniotomyCentre - P.tumourDepthMm * axis;
   tumour.axis = axis;
   std::uniform_real_distribution<double> uniform(-1.0, 1.0);
   for (double& h : tumour.harmonics) h = 0.1 * uniform(rng);
@@ -1568,6 +1577,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
       {"bias_strength", P.biasStrength},
       {"contrast", toString(P.contrast)},
       {"tumour_appearance", toString(P.tumourAppearance)},
+      {"tumour_depth_mm", P.tumourDepthMm},
       {"gap", toString(P.gap)},
       {"gap_fluid_fraction", P.gapFluidFraction},
       {"cavity_fluid_fraction", P.cavityFluidFraction},

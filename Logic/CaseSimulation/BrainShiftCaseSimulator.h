@@ -75,6 +75,10 @@ struct CaseParameters {
   double biasStrength = 0.2;   ///< log-amplitude of the multiplicative bias field (0.2: about +-20 %)
   IntraopContrast contrast = IntraopContrast::T1;
   TumourAppearance tumourAppearance = TumourAppearance::RimEnhancing;
+  /// How far the tumour's centre lies below the brain's surface at the craniotomy's centre, along
+  /// the craniotomy's axis (its semi-axis that way is 10 mm: at 22 mm its top is 12 mm deep; at 13
+  /// mm it reaches the cortex, which keeps its outer 3 mm).
+  double tumourDepthMm = 22.0;
   GapContent gap = GapContent::Dark;
   /// FluidAndAir: the share of the gap (and of the cavity) below the air-fluid level, by volume.
   double gapFluidFraction = 0.6, cavityFluidFraction = 0.8;

@@ -21,6 +21,7 @@ CaseParameters builtInCaseParameters(const std::string& scenario, CaseSize size,
   p.biasStrength = o.biasStrength.value_or(p.biasStrength);
   p.contrast = o.contrast.value_or(p.contrast);
   p.tumourAppearance = o.tumourAppearance.value_or(p.tumourAppearance);
+  p.tumourDepthMm = o.tumourDepthMm.value_or(p.tumourDepthMm);
   p.gap = o.gap.value_or(p.gap);
   p.cavityRim = o.cavityRim.value_or(p.cavityRim);
   p.truth = o.truth.value_or(p.truth);

@@ -23,6 +23,7 @@ struct CaseParameterOverrides {
   std::optional<double> noiseFraction, biasStrength;
   std::optional<IntraopContrast> contrast;
   std::optional<TumourAppearance> tumourAppearance;
+  std::optional<double> tumourDepthMm;
   std::optional<GapContent> gap;
   std::optional<bool> cavityRim;
   std::optional<TruthModel> truth;

@@ -56,9 +56,10 @@ struct Configuration {
   bool classificationTumourFluidByLook = true;
   /// "auto" (decided from the image where the aligned tumour lies), "yes" or "no".
   std::string classificationTumourResected = "auto";
-  /// A tumour kept in place by the image is looked at again where the first solve put it (the
-  /// refine stage, whatever its passes): resected there, the scan is classified, fitted and solved
-  /// once more (resectionShownWhereSolved). False: the first decision stands.
+  /// The tumour decided by the image is looked at again where the first solve put it (the refine
+  /// stage, whatever its passes): decided otherwise there (resectionShownWhereSolved for one kept in
+  /// place, tumourShownInPlaceWhereSolved for one found resected), the scan is classified, fitted
+  /// and solved once more. False: the first decision stands.
   bool classificationTumourSecondLook = true;
   /// Passes of the classification that follows the brain (Warfield et al.'s adaptive template):
   /// after a solve the preoperative labels warped by it become the spatial prior, and the

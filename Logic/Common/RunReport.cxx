@@ -64,6 +64,19 @@ void RunReport::addWarnings(const std::vector<std::string>& warnings)
   for (const auto& w : warnings) addWarning(w);
 }
 
+std::size_t RunReport::withdrawWarnings(const std::string& prefix)
+{
+  if (!document_.contains("warnings")) return 0;
+  nlohmann::json& warnings = document_["warnings"];
+  const std::size_t before = warnings.size();
+  nlohmann::json kept = nlohmann::json::array();
+  for (const auto& w : warnings) {
+    if (!(w.is_string() && w.get<std::string>().rfind(prefix, 0) == 0)) kept.push_back(w);
+  }
+  warnings = std::move(kept);
+  return before - warnings.size();
+}
+
 void RunReport::save() const
 {
   nlohmann::json written = document_;

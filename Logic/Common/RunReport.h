@@ -31,6 +31,9 @@ public:
 
   void addWarning(const std::string& warning);
   void addWarnings(const std::vector<std::string>& warnings);
+  /// Withdraws the warnings that begin with `prefix` (what a later step of the run overturned);
+  /// returns how many.
+  std::size_t withdrawWarnings(const std::string& prefix);
   const nlohmann::json& document() const { return document_; }
 
   /// Writes the report atomically.

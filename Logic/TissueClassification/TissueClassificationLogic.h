@@ -99,6 +99,8 @@ TumourResectionEvidence tumourResectionEvidenceOf(const std::vector<float>& tumo
                                                   double preopRelative, TumourResection told);
 /// Resected or not, as the evidence says (or as `told`, when not Auto).
 bool decideTumourResection(const TumourResectionEvidence& evidence, TumourResection told);
+/// How the classification's warning of a resection it found by the image begins.
+constexpr const char* TumourLooksResectedWarning = "classify: the tumour looks resected";
 /// The evidence of the tumour's voxels where a solve put it, after a first classification found the
 /// tumour in place through the rigid prior. Under a large shift that prior's tumour site holds the
 /// parenchyma that sank into it; where the solve put the tumour, a cavity shows. Resected when air
@@ -113,6 +115,14 @@ bool decideTumourResection(const TumourResectionEvidence& evidence, TumourResect
 /// cavity filled with saline alone is not told from a cystic tumour: it stays in place unless the
 /// user says otherwise.
 bool resectionShownWhereSolved(const TumourResectionEvidence& whereSolved);
+/// The evidence of the tumour's voxels where a solve put it, after a first classification found the
+/// tumour resected through the rigid prior. A tumour near the cortex sinks with the brain: under a
+/// large shift its place through the rigid prior holds the gap's fluid, and it looks resected there.
+/// In place when no cavity shows where the solve put it: the scan's air known, less of it than a
+/// cavity holds (the 5 % of resectionShownWhereSolved), less than 20 % like fluid (a cavity shows
+/// 34-81 %; the tumours near the cortex that sank, 0.7-17 % in the probes of the built-in cases),
+/// and the vote for in place (decideTumourResection).
+bool tumourShownInPlaceWhereSolved(const TumourResectionEvidence& whereSolved);
 
 /// The intensity channel's 0-100 scale: 0 and 100 are these values of the intraoperative image
 /// (its 1st and 99th percentiles over the head).

@@ -277,18 +277,22 @@ bool meshHolds(vtkUnstructuredGrid* mesh, LabelPixel label)
   return false;
 }
 
-/// Where `solved` puts the tumour, when the first classification found it in place by the image:
-/// its voxels' intensities on the classification's scale, voting as its prototypes did.
+/// Where `solved` puts the tumour, when the first classification decided on it by the image (its
+/// place through the rigid prior): its voxels' intensities on the classification's scale, voting as
+/// its prototypes did. Under a large shift that place holds what sank into it: the parenchyma over
+/// a cavity (found in place), or the gap's fluid over a tumour near the cortex that sank with the
+/// brain (found resected).
 TumourSecondLook lookWhereSolved(RunContext& context, const SolvedMesh& solved)
 {
   Stopwatch clock;
   TumourSecondLook check;
   const nlohmann::json classify = context.report().stageOrEmpty("classify");
   const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
-  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || classify.value("tumour_resected", true) ||
-      !context.configuration().classificationTumourSecondLook) {
+  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || !classify.contains("tumour_resected") ||
+      !classify["tumour_resected"].is_boolean() || !context.configuration().classificationTumourSecondLook) {
     return check;
   }
+  const bool firstResected = classify["tumour_resected"].get<bool>();
   auto notChecked = [&](const std::string& why) {
     check.entry = {{"checked", false}, {"why_not", why}};
     return check;
@@ -319,15 +323,27 @@ TumourSecondLook lookWhereSolved(RunContext& context, const SolvedMesh& solved)
   if (intensities.size() < fewestVoxels) return notChecked("the tumour lies outside the scan where the solve put it");
   const TumourResectionEvidence whereSolved =
     tumourResectionEvidenceOf(intensities, contrast, numberOr(evidence, "preop_relative", nan), TumourResection::Auto);
-  check.resected = resectionShownWhereSolved(whereSolved);
-  check.entry = {{"checked", true}, {"resected", check.resected}, {"evidence", tumourEvidenceJson(whereSolved)}, {"seconds", clock.seconds()}};
+  const bool resected = firstResected ? !tumourShownInPlaceWhereSolved(whereSolved) : resectionShownWhereSolved(whereSolved);
+  if (resected != firstResected) check.overturnedTo = resected;
+  check.entry = {{"checked", true},
+                 {"resected", resected},
+                 {"first_look_resected", firstResected},
+                 {"overturned", resected != firstResected},
+                 {"evidence", tumourEvidenceJson(whereSolved)},
+                 {"seconds", clock.seconds()}};
   char line[400];
-  if (check.resected) {
+  if (check.overturnedTo && resected) {
     std::snprintf(line, sizeof(line), "refine: where the first solve put the tumour, %.0f %% of it looks like fluid or air (%.0f %% like air): "
                   "resected, not in place as its place through the rigid prior said; classified again\n",
                   100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
     context.say("%s", line);
-  } else if (decideTumourResection(whereSolved, TumourResection::Auto)) {
+  } else if (check.overturnedTo) {
+    std::snprintf(line, sizeof(line), "refine: where the first solve put the tumour, %.0f %% of it looks like tissue, %.0f %% like fluid or "
+                  "air (%.0f %% like air): in place, not resected as its place through the rigid prior said (the tumour sank with "
+                  "the brain); classified again\n", 100 * (whereSolved.tumourLikeShare + whereSolved.parenchymaLikeShare),
+                  100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
+    context.say("%s", line);
+  } else if (!firstResected && decideTumourResection(whereSolved, TumourResection::Auto)) {
     std::snprintf(line, sizeof(line), "refine: the tumour's resection is uncertain: where the first solve put it, %.0f %% of it looks like "
                   "fluid but %.0f %% like air, as a cystic or necrotic tumour in place would; kept in place "
                   "(--tumour-resected yes if it was resected)", 100 * whereSolved.fluidLikeShare, 100 * whereSolved.airLikeShare);
@@ -337,8 +353,13 @@ TumourSecondLook lookWhereSolved(RunContext& context, const SolvedMesh& solved)
 }
 
 /// The scan classified again with the tumour decided where the first solve put it, and the
-/// surface fitted and solved again on it.
-void runTumourDecisionPass(RunContext& context, bool resected)
+/// surface fitted and solved again on it. A resected tumour's prior stays the rigid one (its
+/// voxels become background, wherever its prototypes came from); a tumour in place is classified
+/// on the labels warped by the first solve, which put it where it sank (through the rigid prior its
+/// prototypes would be the gap's fluid that fills its old place), and, as in a refine pass, only
+/// where that solve moved the tissue: elsewhere the first classification (`firstLabels`) stays.
+/// The warped prior's pass number 0 tells the classify stage's report that it is this pass.
+void runTumourDecisionPass(RunContext& context, bool resected, const LabelImage::Pointer& firstLabels)
 {
   struct Held { // cleared however the pass ends
     RunContext& context;
@@ -346,8 +367,14 @@ void runTumourDecisionPass(RunContext& context, bool resected)
     {
       context.holdTumourDecision(std::nullopt);
       context.setRepeatPass(false);
+      context.setWarpedPrior(nullptr, 0);
     }
   } held{context};
+  if (!resected) {
+    const double reachMm = context.configuration().classificationRefinementReachMm;
+    const WarpedPrior prior = labelsWarpedBySolve(context, reachMm);
+    context.setWarpedPrior(prior.labels, 0, reachMm > 0 ? prior.moved : nullptr, firstLabels);
+  }
   context.holdTumourDecision(RunContext::HeldTumourDecision{resected, "the tumour where the first solve put it"});
   context.setRepeatPass(true);
   runClassifyStage(context);
@@ -357,17 +384,17 @@ void runTumourDecisionPass(RunContext& context, bool resected)
 
 } // namespace
 
-bool secondLookResectsTumour(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName)
+bool secondLookOverturnsTumourDecision(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName)
 {
   if (context.repeatPass() || !context.wholePipeline()) return false;
   const fs::path rigidFile = context.output("rigid_intraop_to_preop.tfm");
   SolvedMesh solved{meshName, firstSolve, readTransform(rigidFile)};
   if (!isLinearTransform(solved.rigid)) throw InputError(rigidFile.string() + ": not a rigid transform");
   TumourSecondLook look = lookWhereSolved(context, solved);
-  // Not resected here: the refine stage looks again where the solve with the block matches puts
+  // Not overturned here: the refine stage looks again where the solve with the block matches puts
   // the tumour (more exactly placed: on the small rf15 case this look saw 30 % of it like fluid,
   // that one 35 %, the vote's bound).
-  if (!look.resected) return false;
+  if (!look.overturnedTo) return false;
   look.entry["on"] = "the surface's solve, before the block matches";
   context.keepTumourSecondLook(std::move(look));
   return true;
@@ -389,9 +416,15 @@ void runRefineStage(RunContext& context)
   const TumourSecondLook tumour = looked ? std::move(*looked) : lookWhereSolved(context, solvedMeshAndRigid(context));
   if (!tumour.warning.empty()) context.report().addWarning(tumour.warning);
   nlohmann::json tumourEntry = tumour.entry;
-  if (tumour.resected) {
+  if (tumour.overturnedTo) {
     Stopwatch decisionClock;
-    runTumourDecisionPass(context, true);
+    runTumourDecisionPass(context, *tumour.overturnedTo, first.anchor);
+    if (!*tumour.overturnedTo) {
+      context.report().withdrawWarnings(TumourLooksResectedWarning);
+      context.report().addWarning("refine: the tumour looked resected through the rigid prior, but where the first solve put it, "
+                                  "it looks in place (no cavity's air, hardly any fluid): kept in place; --tumour-resected yes if it "
+                                  "was resected");
+    }
     first.restateIn(context.report());
     first.takeClassification(context);
     tumourEntry["decision_pass_seconds"] = decisionClock.seconds();

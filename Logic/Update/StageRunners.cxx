@@ -291,8 +291,10 @@ void runClassifyStage(RunContext& context)
                                          {"contrast", scanContrastJson(result.contrast, result.intensityScale)},
                                          {"relabelled_where_moved", relabelled},
                                          {"fluid_joined_to_gaps_ml", result.fluidJoinedToGapsMl},
-                                         {"prior", prior ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
-                                                         : std::string("preoperative labels through the rigid transform")},
+                                         {"prior", !prior ? std::string("preoperative labels through the rigid transform")
+                                                   : context.warpedPriorPass() > 0
+                                                     ? "preoperative labels warped by refine pass " + std::to_string(context.warpedPriorPass())
+                                                     : std::string("preoperative labels warped by the first solve (the tumour's second look)")},
                                          {"feature_seconds", result.featureSeconds},
                                          {"knn_seconds", result.knnSeconds},
                                          {"knn_queries", result.knnQueries},
@@ -425,14 +427,15 @@ void runSimulateStage(RunContext& context)
     blockMatching["reason"] = *matchingUnavailable;
     context.report().addWarning("simulate: block matching did not run (" + *matchingUnavailable + "); the solve is the surface's alone");
   } else if (configuration.blockMatching.enabled) {
-    // A first solve the tumour's second look replaces (finding the tumour resected where this
-    // solve puts it, the refine stage classifies and solves again) is the surface's alone: the pass
-    // after it matches the blocks. (Before the refine stage's passes, by contrast, the first solve
-    // matches its blocks: the labels it warps are their prior, and solved by the surface alone it
-    // cost the T2 scans 0.05-0.13 mm mean.)
+    // A first solve the tumour's second look replaces (finding the tumour resected, or in place,
+    // where this solve puts it, against the first classification: the refine stage classifies and
+    // solves again) is the surface's alone: the pass after it matches the blocks. (Before the
+    // refine stage's passes, by contrast, the first solve matches its blocks: the labels it warps
+    // are their prior, and solved by the surface alone it cost the T2 scans 0.05-0.13 mm mean.)
     attachDisplacements(mesh, surfaceOnly);
-    if (secondLookResectsTumour(context, mesh, meshFile.string())) {
-      const std::string why = "the tumour is resected where the surface's solve puts it: the refine stage classifies and solves again";
+    if (secondLookOverturnsTumourDecision(context, mesh, meshFile.string())) {
+      const std::string why = "where the surface's solve puts the tumour overturns the classification's decision on it: the refine "
+                              "stage classifies and solves again";
       blockMatching["used"] = false;
       blockMatching["reason"] = why + ", and matches the blocks there";
       context.say("simulate: block matching waits: %s\n", why.c_str());

@@ -336,8 +336,8 @@ const std::vector<PipelineStage>& pipelineStages()
                 "(writes brain_surface.vtp)", runSurfaceStage},
     {"simulate", "linear elastic finite element solve in a PETSc/MPI worker (adds Displacement to mesh.vtu)",
      runSimulateStage},
-    {"refine", "the classification follows the brain: a tumour kept in place is looked at again where the solve put it (resected "
-               "there: classify, surface and simulate run once more), then the preoperative labels warped by the solve become the "
+    {"refine", "the classification follows the brain: the tumour decided by the image is looked at again where the solve put it "
+               "(decided otherwise there: classify, surface and simulate run once more), then the preoperative labels warped by the solve become the "
                "spatial prior and classify, surface and simulate run again until the brain boundary settles (rewrites their files)",
      runRefineStage},
     {"warp", "dense deformation and warped preoperative volumes (writes intraop_to_preop.h5, "

@@ -79,11 +79,13 @@ struct SerialScanSession {
   int scans = 0; ///< scans registered so far
 };
 
-/// Where the first solve put the tumour, when the first classification found it in place by the
-/// image (the refine stage's second look): its voxels voting as the tumour's prototypes did.
+/// Where the first solve put the tumour, when the first classification decided on it by the image
+/// (the refine stage's second look): its voxels voting as the tumour's prototypes did.
 struct TumourSecondLook {
-  nlohmann::json entry = nullptr; ///< null: not looked at (no tumour, told, or resected already)
-  bool resected = false;
+  nlohmann::json entry = nullptr; ///< null: not looked at (no tumour, or decided by the user or an earlier scan)
+  /// The decision where the solve put the tumour (resected or not), when it overturns the first
+  /// classification's; empty when that one stands.
+  std::optional<bool> overturnedTo;
   std::string warning; ///< the vote says resected without air: kept in place, said when the look is taken
 };
 
@@ -155,9 +157,9 @@ public:
   /// by the last solve (classify then uses them with the identity instead of the preoperative labels
   /// through the rigid transform, and surface reuses the preoperative boundary it found); null: none.
   /// `moved` (on the same grid) marks where the solve moved the tissue: only there does the new
-  /// classification replace `anchor`, the classification through the rigid prior (elsewhere the two
-  /// priors agree, and an ambiguous boundary left to the prior alone would follow the last pass's
-  /// own error from pass to pass).
+  /// classification replace `anchor`, the classification through the rigid prior (or the tumour
+  /// decision pass's, which kept it elsewhere: the two priors agree there, and an ambiguous
+  /// boundary left to the prior alone would follow the last pass's own error from pass to pass).
   void setWarpedPrior(LabelImage::Pointer labels, int pass, MaskImage::Pointer moved = nullptr, LabelImage::Pointer anchor = nullptr)
   {
     warpedPrior_ = std::move(labels);
@@ -293,12 +295,13 @@ void runSurfaceStage(RunContext& context);
 void runWarpStage(RunContext& context);
 void runRefineStage(RunContext& context); ///< RefineStage.cxx
 /// The refine stage's second look at the tumour, made early on the first solve of a scan
-/// (`firstSolve`, its displacements attached; `meshName` names it in errors): whether it finds the
-/// tumour resected where that solve puts it. Then the look is kept for the refine stage, which
-/// classifies and solves again with the tumour resected; else the refine stage looks again on the
-/// scan's final solve (and this look leaves nothing behind). False in the refine stage's own
-/// passes, and where no refine stage follows in this run (a stage run alone).
-bool secondLookResectsTumour(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName);
+/// (`firstSolve`, its displacements attached; `meshName` names it in errors): whether where that
+/// solve puts the tumour overturns the first classification's decision (resected where it was
+/// found in place, or in place where it was found resected). Then the look is kept for the refine
+/// stage, which classifies and solves again under the new decision; else the refine stage looks
+/// again on the scan's final solve (and this look leaves nothing behind). False in the refine
+/// stage's own passes, and where no refine stage follows in this run (a stage run alone).
+bool secondLookOverturnsTumourDecision(RunContext& context, vtkUnstructuredGrid* firstSolve, const std::string& meshName);
 /// The tumour's evidence as report.json keeps it (null without a tumour).
 nlohmann::json tumourEvidenceJson(const TumourResectionEvidence& evidence);
 

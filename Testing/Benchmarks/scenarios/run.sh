@@ -36,14 +36,29 @@ require_brainshift
 scenarios_or_all
 # KEEP_ROWS=1: the rows of the scenarios.csv already in OUTPUT_DIR that this run does not give (other
 # variants, other scenarios, elastix) are kept in the new table (report.py --keep-rows).
+# The earlier machine description stays, the kept rows having been measured then; a line under it
+# says which scenarios this run measured again, when and at what load.
 keep=()
+previous_machine=
 if [ "${KEEP_ROWS:-0}" != 0 ] && [ -f "$out/scenarios.csv" ]; then
   mkdir -p "$out/runs"
   cp "$out/scenarios.csv" "$out/runs/previous-scenarios.csv"
   keep=(--keep-rows "$(cd "$out/runs" && pwd)/previous-scenarios.csv")
+  if [ -f "$out/machine.txt" ]; then
+    previous_machine=$out/runs/previous-machine.txt
+    cp "$out/machine.txt" "$previous_machine"
+  fi
 fi
 prepare_output machine.txt scenarios.csv summary.md tre_vs_shift.png tre_vs_time.png
 write_machine_description
+if [ -n "$previous_machine" ]; then
+  {
+    cat "$previous_machine"
+    echo "rerun on $(date -u '+%Y-%m-%d %H:%M:%S UTC') (load $(cut -d' ' -f1-3 /proc/loadavg)," \
+      "variants ${variants[*]}): ${scenarios[*]}"
+  } > "$out/machine.txt.new"
+  mv "$out/machine.txt.new" "$out/machine.txt"
+fi
 mkdir -p "$out/runs"
 
 once_config=$out/runs/once.json

@@ -5,7 +5,9 @@
 // catalogue: at least 12 variants, every site and shift from 5 to 20 mm, named uniquely.
 #include "BrainShiftTestingSupport.h"
 #include "CaseSimulationTestSupport.h"
+#include "DistanceMaps.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <set>
@@ -135,6 +137,43 @@ int CaseSimulationScenarioTest(int, char*[])
       }
       BS_CHECK_MSG(margin >= 3 && cavity == 0, margin << " margin, " << cavity << " near a cavity");
       BS_CHECK(c.figures.cavityVolumeMl == 0.0);
+    }
+    // The tumour's depth: its centre 22 mm below the cortex by default (along the craniotomy's
+    // axis its top 12 mm deep), 13 mm in the superficial scenarios, where it reaches the cortex (the
+    // outer 3 mm kept).
+    {
+      auto shallowestTumourMm = [](const CaseParameters& p) {
+        const SimulatedCase c = simulateCase(p);
+        auto brain = MaskImage::New();
+        brain->CopyInformation(c.preopLabels);
+        brain->SetRegions(c.preopLabels->GetLargestPossibleRegion());
+        brain->Allocate();
+        const LabelPixel* l = c.preopLabels->GetBufferPointer();
+        unsigned char* m = brain->GetBufferPointer();
+        const std::size_t n = c.preopLabels->GetLargestPossibleRegion().GetNumberOfPixels();
+        for (std::size_t i = 0; i < n; ++i) m[i] = l[i] >= 2;
+        const ScalarImage::Pointer toSurface = signedDistanceMm(brain); // negative inside
+        const float* d = toSurface->GetBufferPointer();
+        float shallowest = 1e9f;
+        for (std::size_t i = 0; i < n; ++i) {
+          if (l[i] == 4) shallowest = std::min(shallowest, -d[i]);
+        }
+        return shallowest;
+      };
+      const CaseParameters superficial = smallScenario("rf20-superficial-intact");
+      BS_CHECK(superficial.tumourDepthMm == 13.0 && !superficial.resection);
+      BS_CHECK(caseScenario("lp15-fe-superficial-intact").parameters.truth == TruthModel::FiniteElementSliding);
+      const float deep = shallowestTumourMm(smallScenario("default")), near = shallowestTumourMm(superficial);
+      std::cout << "the tumour's shallowest voxel below the cortex: default " << deep << " mm, superficial " << near << " mm\n";
+      // Measured on the small case (2 mm grid; the nearest surface may be a sulcus beside the
+      // craniotomy): 5.7 and 3.5 mm.
+      BS_CHECK_MSG(near < 4.0f, near);
+      BS_CHECK_MSG(deep > near + 2.0f, deep << " against " << near);
+      CaseParameters tooShallow = superficial;
+      tooShallow.tumourDepthMm = 5.0;
+      BS_CHECK_THROWS(tooShallow.validate(), InputError, "--tumour-depth");
+      tooShallow.tumourDepthMm = std::nan("");
+      BS_CHECK_THROWS(tooShallow.validate(), InputError, "--tumour-depth");
     }
   });
 }

@@ -38,6 +38,18 @@ int RunReportTest(int, char*[])
     BS_CHECK(json["stages"]["mesh"]["nodes"] == 25800);
     BS_CHECK(json["warnings"].size() == 1);
     BS_CHECK_THROWS(RunReport(file).setStage("warp", {{"voxels", 3}}), std::invalid_argument, "wall_seconds");
+    {
+      // A warning a later step overturned is withdrawn by how it begins; the others stay.
+      RunReport report(file);
+      report.addWarning("classify: the tumour looks resected (40 % ...)");
+      report.addWarning("surface: 127 surface nodes ...");
+      BS_CHECK(report.withdrawWarnings("classify: the tumour looks resected") == 1);
+      BS_CHECK(report.withdrawWarnings("classify: the tumour looks resected") == 0);
+      BS_CHECK(report.document()["warnings"].size() == 2);
+      BS_CHECK(report.document()["warnings"][1] == "surface: 127 surface nodes ...");
+      RunReport empty(folder / "no-warnings.json");
+      BS_CHECK(empty.withdrawWarnings("a") == 0);
+    }
 
     writeTextFileAtomically(folder / "broken.json", "{ not json");
     BS_CHECK_THROWS(RunReport(folder / "broken.json"), InputError, "broken.json");

@@ -72,6 +72,34 @@ int TissueClassificationTumourDecisionTest(int, char*[])
       tumourResectionEvidenceOf(voxels({{40.0f, 90}, {2.0f, 10}}), scan, 0.4, TumourResection::Auto);
     BS_CHECK_MSG(std::abs(hypointense.tumourLikeShare - 0.9) < 1e-9, hypointense.tumourLikeShare);
     BS_CHECK(!resectionShownWhereSolved(hypointense));
+    // The other way (the first look found the tumour resected through the rigid prior, whose place
+    // now holds the gap's fluid): in place only where no cavity shows where the solve put it. A
+    // tumour near the cortex that sank with the brain (the small lp15-fe-superficial-intact case: 0.7
+    // % like fluid, none like air) is in place; a cavity (fluid with air) is not; nor is saline
+    // alone (the vote), nor a parenchyma-like tumour's place with a cavity's air though most of it
+    // looks like tissue (the 28 % fluid, 6 % air above).
+    const TumourResectionEvidence sank =
+      tumourResectionEvidenceOf(voxels({{70.0f, 86}, {60.0f, 13}, {21.0f, 1}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK_MSG(std::abs(sank.fluidLikeShare - 0.01) < 1e-9 && sank.airLikeShare == 0.0, sank.fluidLikeShare);
+    BS_CHECK(tumourShownInPlaceWhereSolved(sank));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(cavity));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(tumourResectionEvidenceOf(voxels({{20.0f, 100}}), scan, 1.0, TumourResection::Auto)));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(thirdFluid));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(someAir));
+    // Air at the cavity's bound (5 %) or more speaks for a cavity even where most of the place looks
+    // like tissue, and the first look's decision stands (a hypointense tumour's own look with 10 %
+    // air, a parenchyma-like one with 6 %); 3 % does not.
+    BS_CHECK(!tumourShownInPlaceWhereSolved(hypointense));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(tumourResectionEvidenceOf(voxels({{70.0f, 94}, {2.0f, 6}}), scan, 1.0, TumourResection::Auto)));
+    BS_CHECK(tumourShownInPlaceWhereSolved(tumourResectionEvidenceOf(voxels({{70.0f, 97}, {2.0f, 3}}), scan, 1.0, TumourResection::Auto)));
+    // Too much fluid for tissue, though the vote (under the first look's 35 %) and the air (none)
+    // would let it pass: a saline-filled cavity or a dark gap under 28 % of the place. Without the
+    // scan's air (no background prototypes) nothing shows a cavity's air, and nothing is overturned.
+    const TumourResectionEvidence saline = tumourResectionEvidenceOf(voxels({{21.0f, 28}, {70.0f, 72}}), scan, 1.0, TumourResection::Auto);
+    BS_CHECK(!decideTumourResection(saline, TumourResection::Auto) && saline.airLikeShare == 0.0);
+    BS_CHECK(!tumourShownInPlaceWhereSolved(saline));
+    BS_CHECK(!tumourShownInPlaceWhereSolved(
+      tumourResectionEvidenceOf(voxels({{70.0f, 99}, {21.0f, 1}}), ScanContrast{std::nan(""), 20.0, 70.0}, 1.0, TumourResection::Auto)));
     BS_CHECK_THROWS(tumourResectionFromString("maybe"), InputError, "yes, no, auto");
     for (bool resection : {true, false}) {
       const testing::ClassifiedCase c = lowFieldCase(resection);
