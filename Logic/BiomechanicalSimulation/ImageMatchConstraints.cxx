@@ -112,6 +112,7 @@ BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configu
   p.blockHalfSizeMm = c.blockHalfSizeMm;
   p.blockSpacingMm = c.blockSpacingMm;
   p.selectedShare = c.selectedShare;
+  p.selectionCellMm = c.selectionCellMm;
   p.maximumBlocks = std::size_t(c.maximumBlocks);
   p.searchRadiusMm = c.searchRadiusMm;
   p.minimumSimilarity = c.minimumSimilarity;

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -33,6 +34,7 @@ void requireSensible(const BlockMatchingParameters& p)
   if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
   if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
   if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
+  if (!(p.selectionCellMm >= 0) || p.selectionCellMm > 200) throw std::invalid_argument("block matching: the selection's cell must be in [0, 200] mm");
   if (!(p.largestPredictedMm >= 0) || p.largestPredictedMm > 200) throw std::invalid_argument("block matching: the largest predicted displacement must be in [0, 200] mm");
 }
 
@@ -541,9 +543,31 @@ bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vecto
   return true;
 }
 
-/// Lattice centres (every `stride` voxels) deep in the brain whose block holds no excluded tissue,
-/// the most structured share of them (variance of the remapped block) first. `found`: how many
-/// qualified before the share and the limit.
+/// `scored` (most structured first) reordered in rounds: each round takes every cube's most
+/// structured candidate not yet taken (cubes `cellMm` wide on the matching grid), the round's in
+/// the order of `scored`. A prefix of the result is spread over the brain as evenly as the
+/// candidates allow and, within each cube, the most structured.
+std::vector<std::pair<double, std::array<int, 3>>> spreadOverCells(const std::vector<std::pair<double, std::array<int, 3>>>& scored,
+                                                                     const itk::Vector<double, 3>& spacing, double cellMm)
+{
+  std::map<std::array<int, 3>, unsigned> takenInCell;
+  std::vector<std::pair<unsigned, std::size_t>> roundAndOrder(scored.size());
+  for (std::size_t c = 0; c < scored.size(); ++c) {
+    std::array<int, 3> cell{};
+    for (unsigned d = 0; d < 3; ++d) cell[d] = int(std::floor(scored[c].second[d] * spacing[d] / cellMm));
+    roundAndOrder[c] = {takenInCell[cell]++, c};
+  }
+  std::sort(roundAndOrder.begin(), roundAndOrder.end());
+  std::vector<std::pair<double, std::array<int, 3>>> spread;
+  spread.reserve(scored.size());
+  for (const auto& [round, c] : roundAndOrder) spread.push_back(scored[c]);
+  return spread;
+}
+
+/// Lattice centres (every `stride` voxels) deep in the brain whose block holds no excluded tissue:
+/// the share of them and at most the limit, the most structured (variance of the remapped block)
+/// first, in the whole brain or cube by cube (`selectionCellMm`, spreadOverCells). `found`: how
+/// many qualified before the share and the limit.
 std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h, int stride, const BlockMatchingParameters& parameters,
                                                  std::size_t& found)
 {
@@ -574,8 +598,11 @@ std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h
         if (!excluded) scored.push_back({squares / n - (sum / n) * (sum / n), {i, j, k}});
       }
   found = scored.size();
-  std::sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  // Ties broken by place, so the order does not depend on the sort's implementation.
+  auto moreStructured = [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); };
+  std::sort(scored.begin(), scored.end(), moreStructured);
   const std::size_t keep = std::min(parameters.maximumBlocks, std::size_t(std::ceil(parameters.selectedShare * double(scored.size()))));
+  if (parameters.selectionCellMm > 0 && keep < scored.size()) scored = spreadOverCells(scored, v.grid->GetSpacing(), parameters.selectionCellMm);
   std::vector<std::array<int, 3>> candidates;
   for (std::size_t c = 0; c < std::min(keep, scored.size()); ++c) candidates.push_back(scored[c].second);
   return candidates;

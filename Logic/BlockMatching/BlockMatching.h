@@ -26,8 +26,13 @@ namespace brainshift {
 struct BlockMatchingParameters {
   double blockHalfSizeMm = 4.0;   ///< a block spans 2 h + 1 voxels of the matching grid per axis
   double blockSpacingMm = 5.0;    ///< candidate block centres on a lattice this far apart
-  double selectedShare = 0.5;     ///< of the candidates, the most structured share is matched
+  double selectedShare = 0.5;     ///< of the candidates, this share is matched (as selectionCellMm orders them)
   std::size_t maximumBlocks = 1500;
+  /// The selection spread over the brain: the candidates fall into cubes this wide, and the blocks
+  /// are taken in rounds, each cube's most structured remaining candidate in each round (within a
+  /// round, the more structured first). 0: the most structured of the whole brain first, wherever
+  /// they lie (a textureless region near the cortex then gets none).
+  double selectionCellMm = 0;
   double searchRadiusMm = 6.0;    ///< around the predicted displacement, per axis
   double coarseStepMm = 2.0;      ///< the first pass of the search; then 1 voxel, then sub-voxel
   double minimumDepthMm = 4.0;    ///< block centres at least this deep inside the brain
@@ -58,7 +63,7 @@ struct BlockMatch {
 struct BlockMatchingResult {
   std::vector<BlockMatch> matches;
   std::size_t candidates = 0;        ///< lattice centres deep enough in the brain
-  std::size_t selected = 0;          ///< the most structured share, matched
+  std::size_t selected = 0;          ///< the share of the candidates matched
   std::size_t lowSimilarity = 0;     ///< dropped: the peak's correlation below the minimum
   std::size_t outsideBrain = 0;      ///< dropped: the matched block not brain in the scan
   std::size_t atSearchEdge = 0;      ///< dropped: the peak on the edge of the search window

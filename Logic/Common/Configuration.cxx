@@ -221,7 +221,7 @@ void readBlockMatching(const json& c, const std::string& file, Configuration& co
   Configuration::BlockMatching& b = configuration.blockMatching;
   const std::vector<std::pair<const char*, double*>> numbers{
     {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
-    {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks},
+    {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks}, {"selection_cell_mm", &b.selectionCellMm},
     {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
     {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
   std::set<std::string> keys{"enabled"};
@@ -461,6 +461,7 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("block_half_size_mm", b.blockHalfSizeMm, 1, 20);
   within("block_spacing_mm", b.blockSpacingMm, 1, 50);
   within("selected_share", b.selectedShare, 0.01, 1);
+  within("selection_cell_mm", b.selectionCellMm, 0, 200);
   within("search_radius_mm", b.searchRadiusMm, 1, 30);
   within("minimum_similarity", b.minimumSimilarity, -1, 1);
   within("maximum_blocks", b.maximumBlocks, 1, 1e6, true);

@@ -100,9 +100,12 @@ struct Configuration {
     bool enabled = true;
     /// Chosen on Testing/Benchmarks/results/blockmatching and five hard scenarios (README): 3,000
     /// blocks 4 mm apart, stiffer matches (0.01 -> 0.03 -> 0.1 -> 0.3 N/mm, each better on the mean
-    /// of the five) and a rejection of gross outliers only (2 mm, 3.5 robust sigmas).
+    /// of the five) and a rejection of gross outliers only (2 mm, 3.5 robust sigmas). The blocks
+    /// spread over 8 mm cubes (of 0, 8, 12 and 16 the best on all 26 hard scenarios, README "Blocks
+    /// spread over the brain").
     double blockHalfSizeMm = 4.0, blockSpacingMm = 4.0, selectedShare = 0.5, searchRadiusMm = 6.0, minimumSimilarity = 0.5;
     double maximumBlocks = 3000;
+    double selectionCellMm = 8;     ///< the selection spread over cubes this wide (BlockMatching.h); 0: by structure alone
     double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;

@@ -44,6 +44,9 @@ declare -A settings=(
   [stiffness-0.03]='"stiffness_n_per_mm": 0.03'
   [stiffness-0.1]='"stiffness_n_per_mm": 0.1'
   [stiffness-1]='"stiffness_n_per_mm": 1.0'
+  [by-structure]='"selection_cell_mm": 0'
+  [cells-12mm]='"selection_cell_mm": 12.0'
+  [blocks-5000]='"maximum_blocks": 5000'
 )
 for name in "${!settings[@]}"; do
   printf '{"block_matching": {%s}}\n' "${settings[$name]}" > "$out/runs/configs/$name.json"

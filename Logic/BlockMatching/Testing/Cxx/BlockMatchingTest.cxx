@@ -10,6 +10,9 @@
 //   window's residue of rounding must not pass for variance);
 // - a refine pass's new classification: the earlier matches whose block it no longer calls brain
 //   are dropped, the others kept as they were;
+// - the selection spread over the brain: where half the brain has a tenth of the contrast, the
+//   most structured blocks all lie in the other half; spread over 8 mm cubes, half of them lie in
+//   the faint half, and match there;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -87,6 +90,60 @@ void checkMatchesHeldAgainstNewClassification(const BlockMatchingResult& result,
   BS_CHECK_MSG(droppedFarFromIt <= result.matches.size() - same.matches.size(), droppedFarFromIt); // the bound's few
 }
 } // namespace
+
+/// A brain whose left half (x < 0) carries the texture at full contrast and whose right half at a
+/// tenth of it (white matter beside the cortex's folds), moved by a known shift, a quarter of the
+/// candidates matched. By structure alone the blocks all go to the left; spread over 8 mm cubes, as
+/// many lie right as left, and they match there too (a tenth of the contrast is still structure
+/// against the noise). The order is the same on every call.
+void checkSelectionSpreadOverTheBrain()
+{
+  const std::array<double, 3> shift{1.6, -2.2, 1.1};
+  const ImageGeometry grid = testing::grid({{56, 56, 56}}, {1.5, 1.5, 1.5}, testing::point(-42, -42, -42));
+  auto halves = [](const PhysicalPoint& p) { return 100 + (p[0] < 0 ? 1.0 : 0.1) * (texture(p) - 100); };
+  const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& p) { return float(halves(p)); });
+  const LabelImage::Pointer labels = testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(distance(p, {0, 0, 0}) > 36 ? 0 : 2); });
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> noise(0.0, 0.5);
+  const ScalarImage::Pointer scan = testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& y) {
+    return float(halves(testing::point(y[0] - shift[0], y[1] - shift[1], y[2] - shift[2])) + noise(rng));
+  });
+  const LabelImage::Pointer scanLabels = testing::imageOn<LabelImage>(grid, [&](const PhysicalPoint& y) {
+    return LabelPixel(distance(testing::point(y[0] - shift[0], y[1] - shift[1], y[2] - shift[2]), {0, 0, 0}) > 36 ? 0 : 2);
+  });
+  auto identity = itk::Euler3DTransform<double>::New();
+  BlockMatchingParameters parameters;
+  parameters.blockSpacingMm = 4;
+  parameters.selectedShare = 0.25;
+  const DisplacementPrediction none;
+  auto rightShare = [](const BlockMatchingResult& r) {
+    std::size_t right = 0;
+    for (const BlockMatch& m : r.matches) right += m.centre[0] > 0;
+    return r.matches.empty() ? 0.0 : double(right) / double(r.matches.size());
+  };
+  const BlockMatchingResult byStructure = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, none, parameters);
+  parameters.selectionCellMm = 8;
+  const BlockMatchingResult spread = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, none, parameters);
+  const BlockMatchingResult again = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, none, parameters);
+  std::vector<double> rightErrors;
+  for (const BlockMatch& m : spread.matches) {
+    if (m.centre[0] > 4) rightErrors.push_back(std::hypot(m.displacement[0] - shift[0], m.displacement[1] - shift[1], m.displacement[2] - shift[2]));
+  }
+  std::sort(rightErrors.begin(), rightErrors.end());
+  const double rightMedian = rightErrors.empty() ? 99 : rightErrors[rightErrors.size() / 2];
+  std::cout << "selection: " << byStructure.selected << " of " << byStructure.candidates << " candidates; right half (a tenth of the contrast) "
+            << rightShare(byStructure) << " of the matches by structure alone, " << rightShare(spread) << " spread over 8 mm cubes ("
+            << spread.matches.size() << " matched, right of x = 4 mm error median " << rightMedian << " mm)\n";
+  BS_CHECK_MSG(byStructure.selected == spread.selected, byStructure.selected << " vs " << spread.selected);
+  BS_CHECK_MSG(rightShare(byStructure) < 0.05, rightShare(byStructure));
+  BS_CHECK_MSG(rightShare(spread) > 0.35 && rightShare(spread) < 0.65, rightShare(spread));
+  BS_CHECK_MSG(spread.matches.size() >= spread.selected * 8 / 10, spread.matches.size());
+  BS_CHECK_MSG(rightMedian < 0.35, rightMedian);
+  BS_CHECK_MSG(again.matches.size() == spread.matches.size(), again.matches.size());
+  for (std::size_t m = 0; m < std::min(again.matches.size(), spread.matches.size()); ++m) {
+    BS_CHECK_MSG(again.matches[m].centre == spread.matches[m].centre && again.matches[m].displacement == spread.matches[m].displacement, m);
+  }
+}
 
 int BlockMatchingTest(int, char*[])
 {
@@ -199,10 +256,15 @@ int BlockMatchingTest(int, char*[])
       return distance(moved(y), {0, 0, 0}) > 38 || distance(inPreop, cavity) < 9 || distance(inPreop, {12, 14, -8}) < 9;
     });
 
+    checkSelectionSpreadOverTheBrain();
+
     parameters.searchRadiusMm = 0;
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "search radius");
     parameters.searchRadiusMm = 6;
     parameters.selectedShare = 1.5;
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selected share");
+    parameters.selectedShare = 1.0;
+    parameters.selectionCellMm = -1;
+    BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selection's cell");
   });
 }

@@ -38,6 +38,9 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(!shipped.surfaceSnapToBoundary && !defaults.surfaceSnapToBoundary);
     BS_CHECK_NEAR(shipped.surfaceRestBandMm, defaults.surfaceRestBandMm, 0);
     BS_CHECK(shipped.surfaceRestBandSmoothingPasses == defaults.surfaceRestBandSmoothingPasses);
+    BS_CHECK_NEAR(shipped.blockMatching.selectionCellMm, defaults.blockMatching.selectionCellMm, 0);
+    BS_CHECK_NEAR(defaults.blockMatching.selectionCellMm, 8.0, 0);
+    BS_CHECK_NEAR(shipped.blockMatching.maximumBlocks, defaults.blockMatching.maximumBlocks, 0);
     BS_CHECK_NEAR(shipped.uncertainty.floorMm, defaults.uncertainty.floorMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.growthPerMm, defaults.uncertainty.growthPerMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.misfitReachMm, defaults.uncertainty.misfitReachMm, 0);
@@ -76,6 +79,10 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(c.uncertainty.displacementShare, 0.25, 0);
     BS_CHECK_NEAR(c.uncertainty.floorMm, defaults.uncertainty.floorMm, 0); // not in the file: the default
 
+    // The blocks chosen by structure alone, as before they were spread over the brain.
+    writeTextFileAtomically(file, R"({"block_matching": {"selection_cell_mm": 0}})");
+    BS_CHECK_NEAR(Configuration::load(file).blockMatching.selectionCellMm, 0.0, 0);
+
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
       BS_CHECK_THROWS(Configuration::load(file), InputError, fragment);
@@ -112,6 +119,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"uncertainty": {"floor_mm": -0.1}})", "uncertainty.floor_mm -0.1 is outside 0 to 100");
     refused(R"({"uncertainty": {"misfit_reach_mm": 0}})", "uncertainty.misfit_reach_mm must be above 0");
     refused(R"({"uncertainty": {"share": 0.2}})", "unknown key \"share\"");
+    refused(R"({"block_matching": {"selection_cell_mm": -4}})", "block_matching.selection_cell_mm -4 is outside 0 to 200");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
