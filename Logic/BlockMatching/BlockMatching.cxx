@@ -34,7 +34,9 @@ void requireSensible(const BlockMatchingParameters& p)
   if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
   if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
   if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
-  if (!(p.selectionCellMm >= 0) || p.selectionCellMm > 200) throw std::invalid_argument("block matching: the selection's cell must be in [0, 200] mm");
+  if (!(p.selectionCellMm == 0 || (p.selectionCellMm >= 1 && p.selectionCellMm <= 200))) {
+    throw std::invalid_argument("block matching: the selection's cell must be 0 (by structure alone) or in [1, 200] mm");
+  }
   if (!(p.largestPredictedMm >= 0) || p.largestPredictedMm > 200) throw std::invalid_argument("block matching: the largest predicted displacement must be in [0, 200] mm");
 }
 
@@ -550,12 +552,12 @@ bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vecto
 std::vector<std::pair<double, std::array<int, 3>>> spreadOverCells(const std::vector<std::pair<double, std::array<int, 3>>>& scored,
                                                                      const itk::Vector<double, 3>& spacing, double cellMm)
 {
-  std::map<std::array<int, 3>, unsigned> takenInCell;
+  std::map<std::array<int, 3>, unsigned> seenInCell; // a candidate's rank within its cube
   std::vector<std::pair<unsigned, std::size_t>> roundAndOrder(scored.size());
   for (std::size_t c = 0; c < scored.size(); ++c) {
     std::array<int, 3> cell{};
     for (unsigned d = 0; d < 3; ++d) cell[d] = int(std::floor(scored[c].second[d] * spacing[d] / cellMm));
-    roundAndOrder[c] = {takenInCell[cell]++, c};
+    roundAndOrder[c] = {seenInCell[cell]++, c};
   }
   std::sort(roundAndOrder.begin(), roundAndOrder.end());
   std::vector<std::pair<double, std::array<int, 3>>> spread;

@@ -461,7 +461,7 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("block_half_size_mm", b.blockHalfSizeMm, 1, 20);
   within("block_spacing_mm", b.blockSpacingMm, 1, 50);
   within("selected_share", b.selectedShare, 0.01, 1);
-  within("selection_cell_mm", b.selectionCellMm, 0, 200);
+  if (b.selectionCellMm != 0) within("selection_cell_mm", b.selectionCellMm, 1, 200); // 0: by structure alone
   within("search_radius_mm", b.searchRadiusMm, 1, 30);
   within("minimum_similarity", b.minimumSimilarity, -1, 1);
   within("maximum_blocks", b.maximumBlocks, 1, 1e6, true);

@@ -9,10 +9,11 @@
 # scan's landmark TRE against its truth (`brainshift evaluate`). Targets (issue 17): a later scan
 # <= 3 s, the first <= 7 s on 2 cores.
 #
-#   Testing/Benchmarks/session/run.sh [OUTPUT_DIR]
+#   [CONFIG=FILE] Testing/Benchmarks/session/run.sh [OUTPUT_DIR]
 #
-# OUTPUT_DIR defaults to Testing/Benchmarks/results/session. Writes machine.txt, session.csv,
-# summary.md. Run it on a quiet machine: other work slows every figure.
+# OUTPUT_DIR defaults to Testing/Benchmarks/results/session. CONFIG: a configuration file for the
+# sessions (`watch --config`; machine.txt names it), to time a setting against the defaults. Writes
+# machine.txt, session.csv, summary.md. Run it on a quiet machine: other work slows every figure.
 set -euo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -24,8 +25,14 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 ensure_matplotlib # report.py imports benchmark_common.py, which needs it
 require_brainshift
+config=()
+if [ -n "${CONFIG:-}" ]; then
+  [ -f "$CONFIG" ] || die "CONFIG=$CONFIG: no such file"
+  config=(--config "$(cd "$(dirname "$CONFIG")" && pwd)/$(basename "$CONFIG")")
+fi
 prepare_output machine.txt session.csv summary.md runs/
 write_machine_description
+if [ ${#config[@]} -gt 0 ]; then echo "configuration: ${config[1]}: $(tr -s ' \n' ' ' < "${config[1]}")" >> "$out/machine.txt"; fi
 mkdir -p "$out/runs"
 
 for shift in 5 10 15; do
@@ -41,7 +48,7 @@ for repeat in $(seq 1 "$repeats"); do
   session=$out/runs/session-$repeat
   run_logged "$out/runs/session-$repeat.log" "$brainshift" watch --preop-image "$case_dir/preop_image.nii.gz" \
     --preop-labels "$case_dir/preop_labels.nii.gz" --overlay "fmri=$case_dir/preop_fmri.nii.gz" \
-    --scans "$scans" --output-dir "$session" --overwrite
+    --scans "$scans" --output-dir "$session" --overwrite ${config[@]+"${config[@]}"}
   number=1
   for shift in 5 10 15; do
     scan=$session/scan-0$number

@@ -89,7 +89,6 @@ void checkMatchesHeldAgainstNewClassification(const BlockMatchingResult& result,
   BS_CHECK_MSG(inSecondCavity == 0, inSecondCavity);
   BS_CHECK_MSG(droppedFarFromIt <= result.matches.size() - same.matches.size(), droppedFarFromIt); // the bound's few
 }
-} // namespace
 
 /// A brain whose left half (x < 0) carries the texture at full contrast and whose right half at a
 /// tenth of it (white matter beside the cortex's folds), moved by a known shift, a quarter of the
@@ -144,6 +143,7 @@ void checkSelectionSpreadOverTheBrain()
     BS_CHECK_MSG(again.matches[m].centre == spread.matches[m].centre && again.matches[m].displacement == spread.matches[m].displacement, m);
   }
 }
+} // namespace
 
 int BlockMatchingTest(int, char*[])
 {
@@ -265,6 +265,8 @@ int BlockMatchingTest(int, char*[])
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selected share");
     parameters.selectedShare = 1.0;
     parameters.selectionCellMm = -1;
+    BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selection's cell");
+    parameters.selectionCellMm = 1e-7; // a cube index past int
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "selection's cell");
   });
 }

@@ -119,7 +119,9 @@ int ConfigurationTest(int, char*[])
     refused(R"({"uncertainty": {"floor_mm": -0.1}})", "uncertainty.floor_mm -0.1 is outside 0 to 100");
     refused(R"({"uncertainty": {"misfit_reach_mm": 0}})", "uncertainty.misfit_reach_mm must be above 0");
     refused(R"({"uncertainty": {"share": 0.2}})", "unknown key \"share\"");
-    refused(R"({"block_matching": {"selection_cell_mm": -4}})", "block_matching.selection_cell_mm -4 is outside 0 to 200");
+    refused(R"({"block_matching": {"selection_cell_mm": -4}})", "block_matching.selection_cell_mm -4 is outside 1 to 200");
+    refused(R"({"block_matching": {"selection_cell_mm": 1e-7}})", "block_matching.selection_cell_mm 1e-07 is outside 1 to 200");
+    refused(R"({"block_matching": {"selection_cell_mm": 250}})", "block_matching.selection_cell_mm 250 is outside 1 to 200");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
