@@ -548,9 +548,11 @@ bool deepInBrain(const MatchingVolumes& v, int i, int j, int k, const std::vecto
 /// `scored` (most structured first) reordered in rounds: each round takes every cube's most
 /// structured candidate not yet taken (cubes `cellMm` wide on the matching grid), the round's in
 /// the order of `scored`. A prefix of the result is spread over the brain as evenly as the
-/// candidates allow and, within each cube, the most structured.
+/// candidates allow and, within each cube, the most structured. `cells`: the cubes holding
+/// candidates; `cellsWithBlock`: those with one among the first `keep`.
 std::vector<std::pair<double, std::array<int, 3>>> spreadOverCells(const std::vector<std::pair<double, std::array<int, 3>>>& scored,
-                                                                     const itk::Vector<double, 3>& spacing, double cellMm)
+                                                                     const itk::Vector<double, 3>& spacing, double cellMm, std::size_t keep,
+                                                                     std::size_t& cells, std::size_t& cellsWithBlock)
 {
   std::map<std::array<int, 3>, unsigned> seenInCell; // a candidate's rank within its cube
   std::vector<std::pair<unsigned, std::size_t>> roundAndOrder(scored.size());
@@ -560,6 +562,9 @@ std::vector<std::pair<double, std::array<int, 3>>> spreadOverCells(const std::ve
     roundAndOrder[c] = {seenInCell[cell]++, c};
   }
   std::sort(roundAndOrder.begin(), roundAndOrder.end());
+  cells = seenInCell.size();
+  cellsWithBlock = std::size_t(std::count_if(roundAndOrder.begin(), roundAndOrder.begin() + std::ptrdiff_t(std::min(keep, roundAndOrder.size())),
+                                             [](const auto& roundOfCandidate) { return roundOfCandidate.first == 0; }));
   std::vector<std::pair<double, std::array<int, 3>>> spread;
   spread.reserve(scored.size());
   for (const auto& [round, c] : roundAndOrder) spread.push_back(scored[c]);
@@ -568,10 +573,10 @@ std::vector<std::pair<double, std::array<int, 3>>> spreadOverCells(const std::ve
 
 /// Lattice centres (every `stride` voxels) deep in the brain whose block holds no excluded tissue:
 /// the share of them and at most the limit, the most structured (variance of the remapped block)
-/// first, in the whole brain or cube by cube (`selectionCellMm`, spreadOverCells). `found`: how
-/// many qualified before the share and the limit.
+/// first, in the whole brain or cube by cube (`selectionCellMm`, spreadOverCells). The counts of
+/// `result`: how many qualified before the share and the limit, and the cubes.
 std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h, int stride, const BlockMatchingParameters& parameters,
-                                                 std::size_t& found)
+                                                 BlockMatchingResult& result)
 {
   // Deep enough: no boundary voxel nearer than the depth, as voxelsAtLeastDeep tests it (the
   // signed Maurer distance's test, DistanceMapsTest), at the lattice's centres alone.
@@ -599,12 +604,14 @@ std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h
             }
         if (!excluded) scored.push_back({squares / n - (sum / n) * (sum / n), {i, j, k}});
       }
-  found = scored.size();
+  result.candidates = scored.size();
   // Ties broken by place, so the order does not depend on the sort's implementation.
   auto moreStructured = [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); };
   std::sort(scored.begin(), scored.end(), moreStructured);
   const std::size_t keep = std::min(parameters.maximumBlocks, std::size_t(std::ceil(parameters.selectedShare * double(scored.size()))));
-  if (parameters.selectionCellMm > 0 && keep < scored.size()) scored = spreadOverCells(scored, v.grid->GetSpacing(), parameters.selectionCellMm);
+  if (parameters.selectionCellMm > 0) {
+    scored = spreadOverCells(scored, v.grid->GetSpacing(), parameters.selectionCellMm, keep, result.selectionCells, result.selectionCellsWithBlock);
+  }
   std::vector<std::array<int, 3>> candidates;
   for (std::size_t c = 0; c < std::min(keep, scored.size()); ++c) candidates.push_back(scored[c].second);
   return candidates;
@@ -721,7 +728,7 @@ BlockMatchingResult matchBlocks(const ScalarImage& preopImage, const LabelImage&
   const double spacing = std::max({geometry.spacing[0], geometry.spacing[1], geometry.spacing[2]});
   const int h = blockLattice(preopImage, parameters).second;
   const int stride = std::max(1, int(std::lround(parameters.blockSpacingMm / spacing)));
-  const std::vector<std::array<int, 3>> candidates = selectCandidates(volumes, h, stride, parameters, result.candidates);
+  const std::vector<std::array<int, 3>> candidates = selectCandidates(volumes, h, stride, parameters, result);
   result.selected = candidates.size();
   result.selectionSeconds = secondsSince(clock);
 

@@ -64,6 +64,9 @@ struct BlockMatchingResult {
   std::vector<BlockMatch> matches;
   std::size_t candidates = 0;        ///< lattice centres deep enough in the brain
   std::size_t selected = 0;          ///< the share of the candidates matched
+  /// The selection spread over cubes (selectionCellMm > 0): the cubes holding candidates, and those
+  /// given at least one block (all of them when there are more blocks than cubes). 0 by structure alone.
+  std::size_t selectionCells = 0, selectionCellsWithBlock = 0;
   std::size_t lowSimilarity = 0;     ///< dropped: the peak's correlation below the minimum
   std::size_t outsideBrain = 0;      ///< dropped: the matched block not brain in the scan
   std::size_t atSearchEdge = 0;      ///< dropped: the peak on the edge of the search window

@@ -823,6 +823,11 @@ ImageDrivenInterior)
   # (The rejection itself is shown on known outliers by FiniteElementSoftConstraintTest; here, at
   # the default stiffness, it drops a gross outlier or none: 1 of 2,809 measured.)
   float_check "$r" "['stages']['simulate']['block_matching']['kept']" "> 1000"
+  # The blocks spread over 8 mm cubes: every cube holding candidates gets one before any gets two.
+  float_check "$r" "['stages']['simulate']['block_matching']['selection']['cell_mm']" "== 8"
+  cells=$(json_value "$r" "['stages']['simulate']['block_matching']['selection']['cells']")
+  selected=$(json_value "$r" "['stages']['simulate']['block_matching']['selected']")
+  float_check "$r" "['stages']['simulate']['block_matching']['selection']['cells_with_a_block']" "== min($cells, $selected)"
   constraints=$(json_value "$r" "['stages']['simulate']['block_matching']['constraints']")
   float_check "$r" "['stages']['simulate']['block_matching']['kept'] + d['stages']['simulate']['block_matching']['rejected']" "== $constraints"
   float_check "$r" "['stages']['simulate']['block_matching']['solves']" ">= 1"

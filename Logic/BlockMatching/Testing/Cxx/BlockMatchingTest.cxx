@@ -11,8 +11,8 @@
 // - a refine pass's new classification: the earlier matches whose block it no longer calls brain
 //   are dropped, the others kept as they were;
 // - the selection spread over the brain: where half the brain has a tenth of the contrast, the
-//   most structured blocks all lie in the other half; spread over 8 mm cubes, half of them lie in
-//   the faint half, and match there;
+//   most structured blocks all lie in the other half; spread over 8 mm cubes, every cube gets a
+//   block before any gets a second, half of them lie in the faint half, and match there;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -134,6 +134,11 @@ void checkSelectionSpreadOverTheBrain()
             << rightShare(byStructure) << " of the matches by structure alone, " << rightShare(spread) << " spread over 8 mm cubes ("
             << spread.matches.size() << " matched, right of x = 4 mm error median " << rightMedian << " mm)\n";
   BS_CHECK_MSG(byStructure.selected == spread.selected, byStructure.selected << " vs " << spread.selected);
+  // Every cube gets a block before any gets a second.
+  std::cout << "  " << spread.selectionCells << " cubes hold candidates, " << spread.selectionCellsWithBlock << " a block\n";
+  BS_CHECK_MSG(byStructure.selectionCells == 0 && spread.selectionCells > 0, byStructure.selectionCells << ", " << spread.selectionCells);
+  BS_CHECK_MSG(spread.selectionCellsWithBlock == std::min(spread.selected, spread.selectionCells),
+               spread.selectionCellsWithBlock << " of " << spread.selectionCells << " for " << spread.selected);
   BS_CHECK_MSG(rightShare(byStructure) < 0.05, rightShare(byStructure));
   BS_CHECK_MSG(rightShare(spread) > 0.35 && rightShare(spread) < 0.65, rightShare(spread));
   BS_CHECK_MSG(spread.matches.size() >= spread.selected * 8 / 10, spread.matches.size());
