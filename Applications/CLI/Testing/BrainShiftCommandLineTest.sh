@@ -105,7 +105,7 @@ UsageErrors)
   expect 2 "--size" -- "$brainshift" demo --size huge --output-dir "$work/usage-demo"
   expect 2 "--shift" -- "$brainshift" demo --shift 80 --output-dir "$work/usage-demo"
   expect 2 "--craniotomy" -- "$brainshift" demo --craniotomy occipital --output-dir "$work/usage-demo"
-  expect 2 "--tumour-depth: 5.000000 mm is outside 13 to 40 mm" -- "$brainshift" demo --tumour-depth 5 --output-dir "$work/usage-demo"
+  expect 2 "--tumour-depth: 5 mm is outside 13 to 40 mm" -- "$brainshift" demo --tumour-depth 5 --output-dir "$work/usage-demo"
   [ -e "$work/usage-demo" ] && fail "a refused demo left $work/usage-demo behind"
   expect 2 "ranks" -- "$brainshift" register --preop-image "$case_dir/preop_image.nii.gz" \
     --preop-labels "$case_dir/preop_labels.nii.gz" --intraop-image "$case_dir/intraop_image.nii.gz" \
