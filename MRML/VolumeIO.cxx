@@ -385,11 +385,13 @@ void writeAs(const TInputImage* image, const fs::path& path, bool compress = tru
   // A compressed single-file NIfTI-1 as ITK writes it: the 348-byte header, the 4-byte extension
   // flag (no extensions), then the voxels; were it otherwise, every such write would be refused as
   // incomplete (every test that writes a volume would fail).
-  std::optional<std::uint64_t> contentBytes;
   if (compress && hasExtension(path, {".nii.gz"})) {
-    contentBytes = NiftiSingleFileHeaderBytes + std::uint64_t(image->GetLargestPossibleRegion().GetNumberOfPixels()) * sizeof(TOutputPixel);
+    const std::uint64_t contentBytes =
+      NiftiSingleFileHeaderBytes + std::uint64_t(image->GetLargestPossibleRegion().GetNumberOfPixels()) * sizeof(TOutputPixel);
+    writeAtomicallyGzipped(writer.GetPointer(), path, contentBytes);
+    return;
   }
-  writeAtomically(writer.GetPointer(), path, compress, contentBytes);
+  writeAtomically(writer.GetPointer(), path, compress);
 }
 
 } // namespace

@@ -17,6 +17,8 @@ packages=(
   libopenigtlink-dev libdcmtk-dev dcmtk dicom3tools
   # command line, JSON, tests
   libcli11-dev nlohmann-json3-dev libgtest-dev
+  # file formats: whole-buffer gzip for the written volumes, HDF5 for the transform files (ITK's)
+  libdeflate-dev libhdf5-dev
   # data: the Colin27 T1 template of the built-in case; python3 for the command-line tests
   mricron-data python3
   # an independent finite element solver: the cross-check test and the built-in case's finite element truth

@@ -3,6 +3,7 @@
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
 #include "BrainShiftTestingSupport.h"
+#include "GzipCompression.h"
 
 #include <zlib.h>
 
@@ -111,6 +112,30 @@ int AtomicFileTest(int, char*[])
       BS_CHECK_THROWS(file.commit(content.size() + 1), MethodError, "incomplete");
     }
     BS_CHECK(fs::file_size(image) == trailerCheckedSize && temporariesIn(folder) == 0);
+
+    // Whole-buffer gzip (libdeflate): a stream zlib reads back byte for byte, whose trailer holds
+    // its length; a source shorter or longer than expected is refused, naming the target.
+    {
+      std::string volume(3 * 1024 * 1024 + 17, '\0');
+      for (std::size_t i = 0; i < volume.size(); ++i) volume[i] = char((i * 2654435761u >> 13) % 7 + (i / 4096) % 3);
+      const fs::path raw = folder / "volume.nii", packed = folder / "volume.nii.gz";
+      std::ofstream(raw, std::ios::binary).write(volume.data(), std::streamsize(volume.size()));
+      {
+        AtomicFile file(packed);
+        gzipFile(raw, file.temporaryPath(), volume.size(), packed);
+        file.commit(volume.size());
+      }
+      BS_CHECK(fs::file_size(packed) < volume.size() / 4);
+      gzFile in = ::gzopen(packed.c_str(), "rb");
+      std::string back(volume.size() + 10, '\1');
+      const int got = ::gzread(in, back.data(), unsigned(back.size()));
+      ::gzclose(in);
+      BS_CHECK_MSG(got == int(volume.size()) && back.compare(0, volume.size(), volume) == 0, "read back " << got << " bytes");
+      AtomicFile file(packed);
+      BS_CHECK_THROWS(gzipFile(raw, file.temporaryPath(), volume.size() + 1, packed), MethodError,
+                      packed.string() + ": " + std::to_string(volume.size()) + " of " + std::to_string(volume.size() + 1) + " bytes");
+      BS_CHECK_THROWS(gzipFile(folder / "absent.nii", file.temporaryPath(), 352, packed), MethodError, "0 of 352 bytes");
+    }
 
     // A folder that cannot be made: a plain file stands where the folder should be.
     std::ofstream(folder / "blocker").close();

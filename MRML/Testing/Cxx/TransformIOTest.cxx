@@ -5,8 +5,11 @@
 #include "TransformIO.h"
 
 #include <itkCompositeTransform.h>
+#include <itkTransformFileWriter.h>
+#include <itk_hdf5.h>
 
 #include <fstream>
+#include <map>
 #include <vector>
 
 namespace {
@@ -31,6 +34,69 @@ void checkSameMapping(const SpatialTransform* expected, const SpatialTransform* 
     const auto a = expected->TransformPoint(y);
     const auto b = actual->TransformPoint(y);
     BS_CHECK_MSG(a.EuclideanDistanceTo(b) < tolerance, what << ": at " << y << ", " << a << " became " << b);
+  }
+}
+
+/// A dataset of an HDF5 file: its text (a string), or its numbers and their stored width.
+struct StoredDataset {
+  std::string text;
+  std::vector<double> values;
+  std::size_t bytesPerValue = 0;
+  bool operator==(const StoredDataset& o) const { return text == o.text && values == o.values && bytesPerValue == o.bytesPerValue; }
+};
+
+herr_t collectDataset(hid_t file, const char* name, const H5O_info_t* info, void* into)
+{
+  if (info->type != H5O_TYPE_DATASET) return 0;
+  auto& datasets = *static_cast<std::map<std::string, StoredDataset>*>(into);
+  StoredDataset& d = datasets[name];
+  const hid_t set = H5Dopen2(file, name, H5P_DEFAULT);
+  const hid_t type = H5Dget_type(set);
+  if (H5Tget_class(type) == H5T_STRING) {
+    const hid_t text = H5Tcopy(H5T_C_S1);
+    H5Tset_size(text, H5T_VARIABLE);
+    char* value[1] = {nullptr};
+    if (H5Dread(set, text, H5S_ALL, H5S_ALL, H5P_DEFAULT, value) >= 0 && value[0]) d.text = value[0];
+    H5free_memory(value[0]);
+    H5Tclose(text);
+  } else {
+    const hid_t space = H5Dget_space(set);
+    d.values.resize(std::size_t(H5Sget_simple_extent_npoints(space)));
+    d.bytesPerValue = H5Tget_size(type);
+    if (!d.values.empty()) H5Dread(set, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, d.values.data());
+    H5Sclose(space);
+  }
+  H5Tclose(type);
+  H5Dclose(set);
+  return 0;
+}
+
+/// Every dataset of an HDF5 file by its path.
+std::map<std::string, StoredDataset> datasetsOf(const fs::path& file)
+{
+  std::map<std::string, StoredDataset> datasets;
+  const hid_t h5 = H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  BS_CHECK_MSG(h5 >= 0, file.string() + ": not an HDF5 file");
+  H5Ovisit(h5, H5_INDEX_NAME, H5_ITER_INC, collectDataset, &datasets);
+  H5Fclose(h5);
+  return datasets;
+}
+
+/// The file BrainShift writes holds the datasets of the file ITK's own writer makes, value for value.
+void checkSameFileAsItkWrites(const SpatialTransform* transform, const fs::path& folder, const std::string& name)
+{
+  writeTransform(transform, folder / (name + ".h5"));
+  auto writer = itk::TransformFileWriterTemplate<double>::New();
+  writer->SetInput(transform);
+  writer->SetFileName((folder / (name + "-itk.h5")).string());
+  writer->Update();
+  const auto ours = datasetsOf(folder / (name + ".h5")), itks = datasetsOf(folder / (name + "-itk.h5"));
+  BS_CHECK_MSG(ours.size() == itks.size() && ours.size() >= 6, name << ": " << ours.size() << " datasets against ITK's " << itks.size());
+  for (const auto& [path, dataset] : itks) {
+    BS_CHECK_MSG(ours.count(path) == 1, name << ": no " << path);
+    BS_CHECK_MSG(ours.at(path) == dataset, name << ": " << path << " differs from ITK's (\"" << ours.at(path).text << "\" against \""
+                                              << dataset.text << "\", " << ours.at(path).values.size() << " against "
+                                              << dataset.values.size() << " values)");
   }
 }
 
@@ -85,6 +151,16 @@ int TransformIOTest(int, char*[])
     BS_CHECK(dynamic_cast<const CompositeTransform*>(compositeRead.GetPointer()) != nullptr);
     BS_CHECK_MSG(describeTransform(compositeRead) == "CompositeTransform (2 transforms)", describeTransform(compositeRead));
     checkSameMapping(composite, compositeRead, 1e-6, "total.h5");
+    // Written from the field's voxels (ITK's writer copies them twice: 0.5 s of a later scan), the
+    // same file as ITK writes: a field alone and the composite.
+    checkSameFileAsItkWrites(warp, folder, "field");
+    checkSameFileAsItkWrites(composite, folder, "composite");
+    BS_CHECK_MSG(datasetsOf(folder / "composite.h5").at("TransformGroup/1/TransformType").text == "DisplacementFieldTransform_double_3_3",
+                 "the composite's first part is its field");
+    BS_CHECK(datasetsOf(folder / "composite.h5").at("TransformGroup/1/TransformParameters").values.size() == 7 * 6 * 5 * 3);
+    auto nested = CompositeTransform::New();
+    nested->AddTransform(composite);
+    BS_CHECK_THROWS(writeTransform(nested, folder / "nested.h5"), std::invalid_argument, "within a composite");
     BS_CHECK_THROWS(writeTransform(composite, folder / "total.tfm"), std::invalid_argument, ".h5");
     BS_CHECK(!fs::exists(folder / "total.tfm"));
 
