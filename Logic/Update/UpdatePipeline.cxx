@@ -227,9 +227,13 @@ nlohmann::json fingerprintEntry(const fs::path& path, const std::string& fingerp
 
 nlohmann::json preoperativeFingerprint(RunContext& context)
 {
+  SerialScanSession* session = context.session();
+  if (session && session->preoperativeFingerprint.is_object()) return session->preoperativeFingerprint;
   const RunOptions& options = context.options();
-  return {{"preop_image", fingerprintEntry(options.preopImage, fingerprintOf(context.preopImage("register")))},
-          {"preop_labels", fingerprintEntry(options.preopLabels, fingerprintOf(context.preopLabels("register")))}};
+  nlohmann::json fingerprint = {{"preop_image", fingerprintEntry(options.preopImage, fingerprintOf(context.preopImage("register")))},
+                                {"preop_labels", fingerprintEntry(options.preopLabels, fingerprintOf(context.preopLabels("register")))}};
+  if (session && session->preoperative) session->preoperativeFingerprint = fingerprint;
+  return fingerprint;
 }
 
 nlohmann::json caseFingerprint(RunContext& context)
