@@ -64,6 +64,20 @@ void RunReport::addWarnings(const std::vector<std::string>& warnings)
   for (const auto& w : warnings) addWarning(w);
 }
 
+void RunReport::replaceWarnings(const std::string& source, const std::vector<std::string>& warnings)
+{
+  std::vector<std::string>& earlier = replaceable_[source];
+  if (!earlier.empty() && document_.contains("warnings")) {
+    nlohmann::json kept = nlohmann::json::array();
+    for (const auto& w : document_["warnings"]) {
+      if (!(w.is_string() && std::find(earlier.begin(), earlier.end(), w.get<std::string>()) != earlier.end())) kept.push_back(w);
+    }
+    document_["warnings"] = std::move(kept);
+  }
+  addWarnings(warnings);
+  earlier = warnings;
+}
+
 std::size_t RunReport::withdrawWarnings(const std::string& prefix)
 {
   if (!document_.contains("warnings")) return 0;

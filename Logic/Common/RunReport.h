@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -27,13 +28,21 @@ public:
   void set(const std::string& key, const nlohmann::json& value);
 
   /// Starts afresh: no stages, entries or warnings (the file is replaced on the next save).
-  void clear() { document_ = nlohmann::json::object(); }
+  void clear()
+  {
+    document_ = nlohmann::json::object();
+    replaceable_.clear();
+  }
 
   void addWarning(const std::string& warning);
   void addWarnings(const std::vector<std::string>& warnings);
   /// Withdraws the warnings that begin with `prefix` (what a later step of the run overturned);
   /// returns how many.
   std::size_t withdrawWarnings(const std::string& prefix);
+  /// Warnings about a result that a later run of the same step replaces (the active surface fitted
+  /// again by the refine stage's passes): those `source` gave last time are withdrawn, these added,
+  /// so the report speaks of the result that stands and not of both.
+  void replaceWarnings(const std::string& source, const std::vector<std::string>& warnings);
   const nlohmann::json& document() const { return document_; }
 
   /// Writes the report atomically.
@@ -42,6 +51,7 @@ public:
 private:
   std::filesystem::path file_;
   nlohmann::json document_;
+  std::map<std::string, std::vector<std::string>> replaceable_; ///< each source's warnings, as last given
 };
 
 /// Wall time since construction, in seconds.

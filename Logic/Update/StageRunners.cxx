@@ -742,7 +742,7 @@ void runSurfaceStage(RunContext& context)
                                         {"preop_boundary_made_ahead_seconds", known.madeAheadSeconds},
                                         {"target_seconds", result.targetSeconds},
                                         {"iteration_seconds", result.iterationSeconds}});
-  context.report().addWarnings(result.warnings);
+  context.report().replaceWarnings("surface fit", result.warnings); // a refine pass's fit replaces the one before
   context.say("surface: %zu nodes (%zu imposed), %u iterations, residual %.2f mm mean (from %.2f), displacement up to %.1f mm, %.2f s\n",
               result.surfaceNodes, result.imposedNodes, result.iterations, result.meanResidualMm, result.initialMeanResidualMm,
               result.maxDisplacementMm, clock.seconds());

@@ -802,6 +802,9 @@ SuperficialTumour)
   grep -q "in place, not resected as its place through the rigid prior said" "$work/superficial-tumour.log" ||
     fail "the overturned decision was not said"
   grep -q "the tumour looks resected" "$r" && fail "report.json still warns that the tumour looks resected"
+  # The surface fitted again replaces the first fit's warnings (both were listed, with their counts).
+  refits=$(python3 -c "import json, sys; print(sum('surface nodes stayed farther' in w for w in json.load(open(sys.argv[1]))['warnings']))" "$r")
+  [ "$refits" -le 1 ] || fail "report.json lists $refits fits' free surface nodes, the first pass's beside the decision pass's"
   [ "$(json_value "$r" "['stages']['simulate']['block_matching']['used']")" = True ] || fail "the pass in place did not match the blocks"
   e=$superficial/evaluation.json
   float_check "$e" "['transforms']['brainshift']['mean_mm']" "< 0.9"

@@ -50,6 +50,20 @@ int RunReportTest(int, char*[])
       RunReport empty(folder / "no-warnings.json");
       BS_CHECK(empty.withdrawWarnings("a") == 0);
     }
+    {
+      // A fit done again replaces its warnings: the first fit's go, the others stay, the second's
+      // are added (one said by both stays once).
+      RunReport report(folder / "refit.json");
+      report.replaceWarnings("surface fit", {"surface: 105 surface nodes ... left free", "surface: 6 surface triangles reversed"});
+      report.addWarning("refine: the tumour ... kept in place");
+      report.replaceWarnings("surface fit", {"surface: 85 surface nodes ... left free", "surface: 6 surface triangles reversed"});
+      const nlohmann::json& warnings = report.document()["warnings"];
+      BS_CHECK_MSG(warnings == nlohmann::json({"refine: the tumour ... kept in place", "surface: 85 surface nodes ... left free",
+                                               "surface: 6 surface triangles reversed"}),
+                   warnings.dump());
+      report.replaceWarnings("surface fit", {});
+      BS_CHECK_MSG(report.document()["warnings"] == nlohmann::json({"refine: the tumour ... kept in place"}), warnings.dump());
+    }
 
     writeTextFileAtomically(folder / "broken.json", "{ not json");
     BS_CHECK_THROWS(RunReport(folder / "broken.json"), InputError, "broken.json");
