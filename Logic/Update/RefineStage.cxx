@@ -22,6 +22,7 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <optional>
 
 namespace brainshift {
 namespace fs = std::filesystem;
@@ -183,6 +184,22 @@ void requireEarlierStages(RunContext& context)
 /// moved nothing (the anchor), its tumour decision, and what it did once for the whole scan (the
 /// preoperative boundary's source and time, the worker's preparation), said again in the stages'
 /// entries each pass rewrites.
+/// What the classify stage's entry says of the tumour: resected or not, and what decided it
+/// ("image": its look through the rigid prior; else the user, an earlier scan, or the look where a
+/// solve put it). Empty without a decision (no tumour).
+struct ClassifiedTumour {
+  bool resected = false;
+  std::string decidedBy;
+};
+
+std::optional<ClassifiedTumour> classifiedTumourOf(const nlohmann::json& classify)
+{
+  if (!classify.contains("tumour_resected") || !classify["tumour_resected"].is_boolean()) return std::nullopt;
+  const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
+  return ClassifiedTumour{classify["tumour_resected"].get<bool>(),
+                          evidence.is_object() ? evidence.value("decided_by", std::string()) : std::string()};
+}
+
 struct FirstPass {
   LabelImage::Pointer anchor;
   std::optional<RunContext::HeldTumourDecision> tumourDecision;
@@ -198,12 +215,10 @@ struct FirstPass {
   void takeClassification(RunContext& context)
   {
     anchor = context.products().readLabelVolume(context.output("intraop_labels.nii.gz"));
-    const nlohmann::json classify = context.report().stageOrEmpty("classify");
     tumourDecision.reset();
-    if (classify.contains("tumour_resected") && classify["tumour_resected"].is_boolean()) {
-      const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
-      const std::string by = evidence.is_object() ? evidence.value("decided_by", std::string()) : std::string();
-      tumourDecision = RunContext::HeldTumourDecision{classify["tumour_resected"].get<bool>(),
+    if (const std::optional<ClassifiedTumour> tumour = classifiedTumourOf(context.report().stageOrEmpty("classify"))) {
+      const std::string& by = tumour->decidedBy;
+      tumourDecision = RunContext::HeldTumourDecision{tumour->resected,
                                                       by == "image" || by.empty() ? "the first classification (through the rigid prior)" : by};
     }
   }
@@ -287,12 +302,10 @@ TumourSecondLook lookWhereSolved(RunContext& context, const SolvedMesh& solved)
   Stopwatch clock;
   TumourSecondLook check;
   const nlohmann::json classify = context.report().stageOrEmpty("classify");
-  const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json());
-  if (!evidence.is_object() || evidence.value("decided_by", std::string()) != "image" || !classify.contains("tumour_resected") ||
-      !classify["tumour_resected"].is_boolean() || !context.configuration().classificationTumourSecondLook) {
-    return check;
-  }
-  const bool firstResected = classify["tumour_resected"].get<bool>();
+  const nlohmann::json evidence = classify.value("tumour_evidence", nlohmann::json()); // the first look's
+  const std::optional<ClassifiedTumour> tumour = classifiedTumourOf(classify);
+  if (!tumour || tumour->decidedBy != "image" || !context.configuration().classificationTumourSecondLook) return check;
+  const bool firstResected = tumour->resected;
   auto notChecked = [&](const std::string& why) {
     check.entry = {{"checked", false}, {"why_not", why}};
     return check;
