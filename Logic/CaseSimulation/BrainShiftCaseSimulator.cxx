@@ -5,6 +5,7 @@
 #include "DistanceMaps.h"
 #include "FiniteElementTruth.h"
 #include "IntensityStatistics.h"
+#include "NumberText.h"
 #include "VolumeIO.h"
 
 #include <itkCompositeTransform.h>
@@ -573,13 +574,8 @@ void CaseParameters::validate() const
   auto require = [](bool ok, const std::string& message) {
     if (!ok) throw InputError(message);
   };
-  auto asGiven = [](double value) { // 5, 12.5, nan: as the user typed it, not 5.000000
-    std::ostringstream text;
-    text << value;
-    return text.str();
-  };
   require(std::isfinite(shiftMillimetres) && shiftMillimetres >= 0 && shiftMillimetres <= 25,
-          "--shift: " + asGiven(shiftMillimetres) + " mm is outside 0 to 25 mm");
+          "--shift: " + numberText(shiftMillimetres) + " mm is outside 0 to 25 mm");
   for (double r : rotationDegrees) {
     require(std::isfinite(r) && std::abs(r) <= 180, "--rotation: each angle must be within +-180 degrees");
   }
@@ -596,7 +592,7 @@ void CaseParameters::validate() const
   require(std::isfinite(gravityTiltDegrees) && std::abs(gravityTiltDegrees) <= 60,
           "the gravity tilt must be within +-60 degrees");
   require(std::isfinite(tumourDepthMm) && tumourDepthMm >= 13 && tumourDepthMm <= 40,
-          "--tumour-depth: " + asGiven(tumourDepthMm) + " mm is outside 13 to 40 mm (the tumour's centre below the cortex)");
+          "--tumour-depth: " + numberText(tumourDepthMm) + " mm is outside 13 to 40 mm (the tumour's centre below the cortex)");
 }
 
 namespace {

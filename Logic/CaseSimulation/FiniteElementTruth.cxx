@@ -3,6 +3,7 @@
 #include "BrainShiftErrors.h"
 #include "ExternalProgram.h"
 #include "CgalLabelMapMesher.h"
+#include "NumberText.h"
 
 #include <itkImageRegionIteratorWithIndex.h>
 #include <vtkCellArray.h>
@@ -482,9 +483,9 @@ void FiniteElementTruthParameters::validate() const
   positive(openingRadiusMm, "openingRadiusMm");
   positive(elementSizeMm, "elementSizeMm");
   positive(fieldTaperMm, "fieldTaperMm");
-  if (!(shiftMm >= 0) || !std::isfinite(shiftMm)) throw InputError("finite element truth: shiftMm must be 0 or more, not " + std::to_string(shiftMm));
+  if (!(shiftMm >= 0) || !std::isfinite(shiftMm)) throw InputError("finite element truth: shiftMm must be 0 or more, not " + numberText(shiftMm));
   if (!(skullBaseFraction > 0 && skullBaseFraction < 1)) {
-    throw InputError("finite element truth: skullBaseFraction must be in (0, 1), not " + std::to_string(skullBaseFraction));
+    throw InputError("finite element truth: skullBaseFraction must be in (0, 1), not " + numberText(skullBaseFraction));
   }
 }
 

@@ -2,6 +2,7 @@
 
 #include "AtomicFile.h"
 #include "BrainShiftErrors.h"
+#include "NumberText.h"
 
 #include <nlohmann/json.hpp>
 
@@ -320,7 +321,7 @@ std::string solverOptionsProblem(const std::string& options)
 void validateMaterial(const Material& material, const std::string& where)
 {
   if (!std::isfinite(material.youngsModulusPa) || material.youngsModulusPa <= 0) {
-    throw InputError(where + ".youngs_modulus_pa: " + std::to_string(material.youngsModulusPa) +
+    throw InputError(where + ".youngs_modulus_pa: " + numberText(material.youngsModulusPa) +
                      " Pa; a positive, finite modulus is expected");
   }
   // Soft tissue lies within 1e2-1e5 Pa, bone near 1e10: outside 1 Pa to 1 GPa the stiffness
@@ -332,7 +333,7 @@ void validateMaterial(const Material& material, const std::string& where)
                      " Pa is outside the physical range 1 Pa to 1e9 Pa (brain tissue: about 1e3 to 1e4 Pa)");
   }
   if (!std::isfinite(material.poissonRatio) || material.poissonRatio < 0 || material.poissonRatio >= 0.5) {
-    throw InputError(where + ".poisson_ratio: " + std::to_string(material.poissonRatio) +
+    throw InputError(where + ".poisson_ratio: " + numberText(material.poissonRatio) +
                      "; it must be at least 0 and below 0.5 (0.5 is incompressible: no linear elastic solution)");
   }
   if (material.poissonRatio >= kLockingPoissonRatio) {
@@ -347,11 +348,11 @@ void validateMaterial(const Material& material, const std::string& where)
 void validateMeshSettings(const Configuration& c, const std::string& source)
 {
   if (!std::isfinite(c.meshResolutionMm) || c.meshResolutionMm < 0.5 || c.meshResolutionMm > 50) {
-    throw InputError(source + ": mesh resolution " + std::to_string(c.meshResolutionMm) + " mm is outside 0.5 to 50 mm");
+    throw InputError(source + ": mesh resolution " + numberText(c.meshResolutionMm) + " mm is outside 0.5 to 50 mm");
   }
   if (c.meshLabels.empty()) throw InputError(source + ": mesh.labels is empty; nothing to mesh");
   if (!std::isfinite(c.meshGrading) || c.meshGrading < 0 || c.meshGrading > 10) {
-    throw InputError(source + ": mesh grading " + std::to_string(c.meshGrading) + " is outside 0 (uniform) to 10");
+    throw InputError(source + ": mesh grading " + numberText(c.meshGrading) + " is outside 0 (uniform) to 10");
   }
   if (c.meshCoarseningLevels < 0 || c.meshCoarseningLevels > 4) {
     throw InputError(source + ": mesh coarsening levels " + std::to_string(c.meshCoarseningLevels) + " is outside 0 to 4");
@@ -359,7 +360,7 @@ void validateMeshSettings(const Configuration& c, const std::string& source)
   if (!std::isfinite(c.meshRegionOfInterestRadiusMm) || c.meshRegionOfInterestRadiusMm < 0 || c.meshRegionOfInterestRadiusMm > 500 ||
       !std::isfinite(c.meshRegionOfInterestCenterLps[0]) || !std::isfinite(c.meshRegionOfInterestCenterLps[1]) ||
       !std::isfinite(c.meshRegionOfInterestCenterLps[2])) {
-    throw InputError(source + ": mesh region of interest radius " + std::to_string(c.meshRegionOfInterestRadiusMm) +
+    throw InputError(source + ": mesh region of interest radius " + numberText(c.meshRegionOfInterestRadiusMm) +
                      " mm (or its centre) is not a finite size within 0 to 500 mm");
   }
   if (c.meshBackend != "lattice" && c.meshBackend != "cgal") {
@@ -373,7 +374,7 @@ void validateMeshSettings(const Configuration& c, const std::string& source)
 void validateRigidSettings(const Configuration& c, const std::string& source)
 {
   if (!std::isfinite(c.rigidSamplingFraction) || c.rigidSamplingFraction < 0.05 || c.rigidSamplingFraction > 4) {
-    throw InputError(source + ": rigid sampling " + std::to_string(c.rigidSamplingFraction) + " is outside 0.05 to 4");
+    throw InputError(source + ": rigid sampling " + numberText(c.rigidSamplingFraction) + " is outside 0.05 to 4");
   }
   if (c.rigidLevels < 1 || c.rigidLevels > 3) {
     throw InputError(source + ": rigid levels " + std::to_string(c.rigidLevels) + " is outside 1 to 3");
@@ -398,22 +399,22 @@ void validateClassificationSettings(const Configuration& c, const std::string& s
   }
   if (!std::isfinite(c.classificationRefinementToleranceMm) || c.classificationRefinementToleranceMm <= 0 ||
       c.classificationRefinementToleranceMm > 10) {
-    throw InputError(source + ": classification refinement tolerance " + std::to_string(c.classificationRefinementToleranceMm) +
+    throw InputError(source + ": classification refinement tolerance " + numberText(c.classificationRefinementToleranceMm) +
                      " mm is outside 0 to 10 mm");
   }
   if (!std::isfinite(c.classificationRefinementReachMm) || c.classificationRefinementReachMm < 0 || c.classificationRefinementReachMm > 200) {
-    throw InputError(source + ": classification refinement reach " + std::to_string(c.classificationRefinementReachMm) +
+    throw InputError(source + ": classification refinement reach " + numberText(c.classificationRefinementReachMm) +
                      " mm is outside 0 to 200 mm");
   }
   if (!std::isfinite(c.classificationSaturationMm) || c.classificationSaturationMm <= 0 || c.classificationSaturationMm > 100) {
-    throw InputError(source + ": classification saturation " + std::to_string(c.classificationSaturationMm) + " mm is outside 0 to 100 mm");
+    throw InputError(source + ": classification saturation " + numberText(c.classificationSaturationMm) + " mm is outside 0 to 100 mm");
   }
 }
 
 void validateSurfaceSettings(const Configuration& c, const std::string& source)
 {
   if (!std::isfinite(c.surfaceRestBandMm) || c.surfaceRestBandMm < 0 || c.surfaceRestBandMm > 5) {
-    throw InputError(source + ": surface rest_band_mm " + std::to_string(c.surfaceRestBandMm) + " mm is outside 0 (off) to 5 mm");
+    throw InputError(source + ": surface rest_band_mm " + numberText(c.surfaceRestBandMm) + " mm is outside 0 (off) to 5 mm");
   }
   if (c.surfaceRestBandSmoothingPasses > 100) {
     throw InputError(source + ": surface rest_band_smoothing_passes " + std::to_string(c.surfaceRestBandSmoothingPasses) +
@@ -424,7 +425,7 @@ void validateSurfaceSettings(const Configuration& c, const std::string& source)
     throw InputError(source + ": surface membrane and bending weights must be within 0 to 1000");
   }
   if (!std::isfinite(c.surfaceImageWeight) || c.surfaceImageWeight < 0 || c.surfaceImageWeight > 1) {
-    throw InputError(source + ": surface image weight " + std::to_string(c.surfaceImageWeight) + " is outside 0 to 1");
+    throw InputError(source + ": surface image weight " + numberText(c.surfaceImageWeight) + " is outside 0 to 1");
   }
   if (c.surfaceMaximumIterations < 1 || c.surfaceMaximumIterations > 100000) {
     throw InputError(source + ": surface max_iterations " + std::to_string(c.surfaceMaximumIterations) + " is outside 1 to 100000");

@@ -6,6 +6,7 @@
 #include "BoundaryNodeSnapping.h"
 #include "CgalLabelMapMesher.h"
 #include "GradedKuhnLattice.h"
+#include "NumberText.h"
 
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
@@ -695,8 +696,8 @@ LabelMapMesh meshLabelMap(const LabelImage& image, const MeshingParameters& para
   result.quality = measureMeshQuality(result.mesh, &image);
   for (int l : chosen) {
     if (!result.quality.meshVolumeMl.count(l)) {
-      throw InputError("meshing: tissue label " + std::to_string(l) + " (" + std::to_string(result.quality.voxelVolumeMl[l]) +
-                       " ml) vanishes at " + std::to_string(parameters.resolutionMm) + " mm; choose a finer --mesh-resolution");
+      throw InputError("meshing: tissue label " + std::to_string(l) + " (" + numberText(result.quality.voxelVolumeMl[l]) +
+                       " ml) vanishes at " + numberText(parameters.resolutionMm) + " mm; choose a finer --mesh-resolution");
     }
     const double ratio = result.quality.meshVolumeMl[l] / result.quality.voxelVolumeMl[l];
     if (std::abs(ratio - 1.0) > 0.1) {

@@ -92,7 +92,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"materials": {"3": {"youngs_modulus_pa": -1}}})", "materials.3.youngs_modulus_pa");
     refused(R"({"materials": {"brain": {"youngs_modulus_pa": 1}}})", "label number");
     refused(R"({"materials": {"2": {"youngs_modulus_pa": "soft"}}})", "a number is expected");
-    refused(R"({"mesh": {"resolution_mm": 0.01}})", "mesh resolution");
+    refused(R"({"mesh": {"resolution_mm": 0.01}})", "mesh resolution 0.01 mm is outside 0.5 to 50 mm"); // as given, not 0.010000
     refused(R"({"mesh": {"labels": []}})", "empty");
     refused(R"({"meshes": {}})", "unknown key \"meshes\"");
     refused(R"({"mesh": {"grading": -1}})", "mesh grading");
@@ -100,7 +100,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"mesh": {"region_of_interest": {"center_lps": [1, 2], "radius_mm": 5}}})", "center_lps");
     refused(R"({"mesh": {"region_of_interest": {"center_lps": [1, 2, 3]}}})", "radius_mm");
     refused(R"({"rigid": {"levels": 4}})", "rigid levels");
-    refused(R"({"rigid": {"sampling": 0}})", "rigid sampling");
+    refused(R"({"rigid": {"sampling": 0}})", "rigid sampling 0 is outside 0.05 to 4");
     refused(R"({"rigid": {"pyramid": 2}})", "unknown key \"pyramid\"");
     refused(R"({"classification": {"tumour_fluid_by_look": 1}})", "classification.tumour_fluid_by_look");
     refused(R"({"classification": {"refinement_passes": "always"}})", "classification.refinement_passes must be \"auto\"");
@@ -113,7 +113,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"rigid": {"levels": 2.5}})", "rigid.levels must be a whole number >= 1");
     refused(R"({"surface": {"max_iterations": -3}})", "surface.max_iterations must be a whole number >= 1");
     refused(R"({"surface": {"residual_correction": "yes"}})", "surface.residual_correction must be true or false");
-    refused(R"({"surface": {"rest_band_mm": 6}})", "surface rest_band_mm 6.000000 mm is outside 0 (off) to 5 mm");
+    refused(R"({"surface": {"rest_band_mm": 6}})", "surface rest_band_mm 6 mm is outside 0 (off) to 5 mm");
     refused(R"({"surface": {"rest_band_mm": "wide"}})", "surface.rest_band_mm: a number is expected");
     refused(R"({"surface": {"rest_band_smoothing_passes": 101}})", "surface rest_band_smoothing_passes 101 is outside 0 to 100");
     refused(R"({"uncertainty": {"floor_mm": -0.1}})", "uncertainty.floor_mm -0.1 is outside 0 to 100");

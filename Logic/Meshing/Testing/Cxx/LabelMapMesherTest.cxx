@@ -292,5 +292,6 @@ int LabelMapMesherTest(int, char*[])
     parameters.resolutionMm = 6.0;
     parameters.labels = {2, 4};
     BS_CHECK_THROWS(meshLabelMap(*zeros, parameters), InputError, "tissue label 4");
+    BS_CHECK_THROWS(meshLabelMap(*zeros, parameters), InputError, "vanishes at 6 mm"); // as given, not 6.000000
   });
 }
