@@ -29,15 +29,14 @@ void runWriter(TWriter* writer, const std::filesystem::path& file, bool compress
 }
 
 /// `compress` off for data zlib cannot shrink much (dense displacement fields of floats: a few
-/// percent smaller for seconds of compression on a 4-million-voxel field). `gzipContentBytes`: the
-/// written stream's length before compression, when the caller knows it (AtomicFile::commit).
+/// percent smaller for seconds of compression on a 4-million-voxel field). A ".gz" target is
+/// written by writeAtomicallyGzipped instead.
 template <class TWriter>
-void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool compress = true,
-                     std::optional<std::uint64_t> gzipContentBytes = std::nullopt)
+void writeAtomically(TWriter* writer, const std::filesystem::path& path, bool compress = true)
 {
   AtomicFile file(path);
   runWriter(writer, file.temporaryPath(), compress, path);
-  file.commit(gzipContentBytes); // verifies the file first: NIfTI's writer does not notice a full disk
+  file.commit(); // verifies the file first: NIfTI's writer does not notice a full disk
 }
 
 /// A ".gz" file as `writer` writes it uncompressed (a scratch file beside the target, removed

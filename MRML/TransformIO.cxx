@@ -15,7 +15,10 @@
 #include <itksys/SystemInformation.hxx>
 
 #include <algorithm>
+#include <cstring>
 #include <type_traits>
+
+#include <fcntl.h>
 
 namespace brainshift {
 namespace fs = std::filesystem;
@@ -42,6 +45,13 @@ public:
   ~Hdf5Handle()
   {
     if (id_ >= 0) close_(id_);
+  }
+  /// Closes it now, throwing if that fails.
+  void close(const char* what)
+  {
+    const herr_t status = close_(id_);
+    id_ = -1;
+    if (status < 0) throw std::runtime_error(what);
   }
   Hdf5Handle(const Hdf5Handle&) = delete;
   Hdf5Handle& operator=(const Hdf5Handle&) = delete;
@@ -93,17 +103,27 @@ void writeHdf5TransformFile(const SpatialTransform* transform, const fs::path& f
       parts.push_back(part.GetPointer());
     }
   }
+  off_t bytes = 1 << 20; // the strings and HDF5's own structures, with room to spare
+  for (const SpatialTransform* part : parts) bytes += off_t(8 * (part->GetNumberOfParameters() + part->GetFixedParameters().Size()));
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); // failures are thrown, naming the file, not printed by HDF5
   const Hdf5Handle access(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, "file access properties");
   if (H5Pset_libver_bounds(access.id(), H5F_LIBVER_V18, H5F_LIBVER_V18) < 0) throw std::runtime_error("HDF5 1.8 compatibility");
-  const Hdf5Handle h5(H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, access.id()), H5Fclose, "the file");
+  Hdf5Handle h5(H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, access.id()), H5Fclose, "the file");
+  // The file's room taken before HDF5 writes into it (HDF5 cuts the file to its end when it closes
+  // it): a full disk or a file-size limit refuses it here, while the file is sound. A write that
+  // HDF5 1.10 finds failing leaves the file half-closed, and the program crashed at its exit.
+  void* handle = nullptr;
+  if (H5Fget_vfd_handle(h5.id(), access.id(), &handle) < 0 || !handle) throw std::runtime_error("the file (no descriptor)");
+  if (const int error = posix_fallocate(*static_cast<int*>(handle), 0, bytes)) {
+    throw std::runtime_error("room for " + std::to_string(bytes) + " bytes (" + std::strerror(error) + ")");
+  }
   itksys::SystemInformation system;
   system.RunOSCheck();
   writeHdf5String(h5.id(), "/ITKVersion", itk::Version::GetITKVersion());
   writeHdf5String(h5.id(), "/HDFVersion", H5_VERS_INFO);
   writeHdf5String(h5.id(), "/OSName", system.GetOSName());
   writeHdf5String(h5.id(), "/OSVersion", system.GetOSRelease());
-  const Hdf5Handle group(H5Gcreate2(h5.id(), "/TransformGroup", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, "/TransformGroup");
+  Hdf5Handle group(H5Gcreate2(h5.id(), "/TransformGroup", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, "/TransformGroup");
   for (std::size_t n = 0; n < parts.size(); ++n) {
     const std::string name = "/TransformGroup/" + std::to_string(n);
     const Hdf5Handle part(H5Gcreate2(h5.id(), name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, name.c_str());
@@ -121,6 +141,13 @@ void writeHdf5TransformFile(const SpatialTransform* transform, const fs::path& f
       writeHdf5Doubles(h5.id(), name + "/TransformParameters", parameters.data_block(), parameters.Size());
     }
   }
+  group.close("/TransformGroup");
+  haddr_t end = 0; // where HDF5's file ends, within the room taken
+  if (H5Fflush(h5.id(), H5F_SCOPE_GLOBAL) < 0 || H5Fget_eoa(h5.id(), &end) < 0) throw std::runtime_error("the file's last blocks");
+  h5.close("the file's last blocks");
+  std::error_code ec;
+  if (fs::file_size(file, ec) > end && !ec) fs::resize_file(file, end, ec); // the room not used
+  if (ec) throw std::runtime_error("the file's end (" + ec.message() + ")");
 }
 } // namespace
 

@@ -23,7 +23,6 @@
 #include <numeric>
 #include <limits>
 #include <random>
-#include <sstream>
 
 namespace brainshift {
 namespace fs = std::filesystem;

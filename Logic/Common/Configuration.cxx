@@ -327,9 +327,7 @@ void validateMaterial(const Material& material, const std::string& where)
   // Soft tissue lies within 1e2-1e5 Pa, bone near 1e10: outside 1 Pa to 1 GPa the stiffness
   // matrix spans more orders of magnitude than the solver can resolve (1e300 gave NaN).
   if (material.youngsModulusPa < 1.0 || material.youngsModulusPa > 1e9) {
-    std::ostringstream value;
-    value << material.youngsModulusPa;
-    throw InputError(where + ".youngs_modulus_pa: " + value.str() +
+    throw InputError(where + ".youngs_modulus_pa: " + numberText(material.youngsModulusPa) +
                      " Pa is outside the physical range 1 Pa to 1e9 Pa (brain tissue: about 1e3 to 1e4 Pa)");
   }
   if (!std::isfinite(material.poissonRatio) || material.poissonRatio < 0 || material.poissonRatio >= 0.5) {

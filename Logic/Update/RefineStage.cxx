@@ -180,10 +180,6 @@ void requireEarlierStages(RunContext& context)
   }
 }
 
-/// What the first pass found, which the refine passes keep: its classification where the solve
-/// moved nothing (the anchor), its tumour decision, and what it did once for the whole scan (the
-/// preoperative boundary's source and time, the worker's preparation), said again in the stages'
-/// entries each pass rewrites.
 /// What the classify stage's entry says of the tumour: resected or not, and what decided it
 /// ("image": its look through the rigid prior; else the user, an earlier scan, or the look where a
 /// solve put it). Empty without a decision (no tumour).
@@ -200,6 +196,10 @@ std::optional<ClassifiedTumour> classifiedTumourOf(const nlohmann::json& classif
                           evidence.is_object() ? evidence.value("decided_by", std::string()) : std::string()};
 }
 
+/// What the first pass found, which the refine passes keep: its classification where the solve
+/// moved nothing (the anchor), its tumour decision, and what it did once for the whole scan (the
+/// preoperative boundary's source and time, the worker's preparation), said again in the stages'
+/// entries each pass rewrites.
 struct FirstPass {
   LabelImage::Pointer anchor;
   std::optional<RunContext::HeldTumourDecision> tumourDecision;

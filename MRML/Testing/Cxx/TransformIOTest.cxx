@@ -8,9 +8,12 @@
 #include <itkTransformFileWriter.h>
 #include <itk_hdf5.h>
 
+#include <csignal>
 #include <fstream>
 #include <map>
 #include <vector>
+
+#include <sys/resource.h>
 
 namespace {
 using namespace brainshift;
@@ -90,6 +93,8 @@ void checkSameFileAsItkWrites(const SpatialTransform* transform, const fs::path&
   writer->SetInput(transform);
   writer->SetFileName((folder / (name + "-itk.h5")).string());
   writer->Update();
+  BS_CHECK_MSG(fs::file_size(folder / (name + ".h5")) == fs::file_size(folder / (name + "-itk.h5")),
+               name << ": " << fs::file_size(folder / (name + ".h5")) << " bytes against ITK's " << fs::file_size(folder / (name + "-itk.h5")));
   const auto ours = datasetsOf(folder / (name + ".h5")), itks = datasetsOf(folder / (name + "-itk.h5"));
   BS_CHECK_MSG(ours.size() == itks.size() && ours.size() >= 6, name << ": " << ours.size() << " datasets against ITK's " << itks.size());
   for (const auto& [path, dataset] : itks) {
@@ -163,6 +168,39 @@ int TransformIOTest(int, char*[])
     BS_CHECK_THROWS(writeTransform(nested, folder / "nested.h5"), std::invalid_argument, "within a composite");
     BS_CHECK_THROWS(writeTransform(composite, folder / "total.tfm"), std::invalid_argument, ".h5");
     BS_CHECK(!fs::exists(folder / "total.tfm"));
+
+    // A disk that fills while the field is written (a 1.5 MB field under a 256 KiB file-size
+    // limit): one error naming the file, the file before it kept, no temporary left.
+    {
+      const SpatialTransform::Pointer large = makeDisplacementFieldTransform(
+        testing::makeSmoothDisplacementField(testing::grid({{40, 40, 40}}, {2, 2, 2}, point(-40, -40, -40), testing::rotationAbout(0, 0, 1, 0)), 0.1));
+      const fs::path kept = folder / "kept.h5";
+      writeTransform(warp, kept);
+      const auto keptBytes = fs::file_size(kept);
+      const auto previousSignal = std::signal(SIGXFSZ, SIG_IGN); // a write past the limit fails with EFBIG
+      rlimit before{};
+      getrlimit(RLIMIT_FSIZE, &before);
+      rlimit limited = before;
+      limited.rlim_cur = 256 * 1024;
+      setrlimit(RLIMIT_FSIZE, &limited);
+      bool refused = false;
+      std::string message;
+      try {
+        writeTransform(large, kept);
+      } catch (const MethodError& e) {
+        refused = true;
+        message = e.what();
+      }
+      setrlimit(RLIMIT_FSIZE, &before);
+      std::signal(SIGXFSZ, previousSignal);
+      BS_CHECK_MSG(refused && message.find("cannot write " + kept.string()) != std::string::npos, message);
+      BS_CHECK(fs::file_size(kept) == keptBytes);
+      for (const auto& entry : fs::directory_iterator(folder)) {
+        BS_CHECK_MSG(entry.path().filename().string().rfind(".tmp-", 0) != 0, entry.path().string() + " was left behind");
+      }
+      writeTransform(large, kept); // and without the limit, the whole field
+      BS_CHECK(datasetsOf(kept).at("TransformGroup/0/TransformParameters").values.size() == 40 * 40 * 40 * 3);
+    }
 
     // Files that are not transforms.
     const fs::path notes = folder / "notes.tfm";
