@@ -62,6 +62,29 @@ private:
   herr_t (*close_)(hid_t);
 };
 
+/// HDF5's printing of its error stack off while this lives (the failures are thrown, naming the
+/// file), and what the process had before put back after it: other HDF5 users (ITK's reader) keep
+/// their own handling.
+class QuietHdf5Errors {
+public:
+  QuietHdf5Errors()
+  {
+    restore_ = H5Eget_auto2(H5E_DEFAULT, &printer_, &data_) >= 0;
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  }
+  ~QuietHdf5Errors()
+  {
+    if (restore_) H5Eset_auto2(H5E_DEFAULT, printer_, data_);
+  }
+  QuietHdf5Errors(const QuietHdf5Errors&) = delete;
+  QuietHdf5Errors& operator=(const QuietHdf5Errors&) = delete;
+
+private:
+  H5E_auto2_t printer_ = nullptr;
+  void* data_ = nullptr;
+  bool restore_ = false;
+};
+
 void writeHdf5String(hid_t file, const std::string& name, const std::string& value)
 {
   const Hdf5Handle type(H5Tcopy(H5T_C_S1), H5Tclose, "a string type");
@@ -105,7 +128,7 @@ void writeHdf5TransformFile(const SpatialTransform* transform, const fs::path& f
   }
   off_t bytes = 1 << 20; // the strings and HDF5's own structures, with room to spare
   for (const SpatialTransform* part : parts) bytes += off_t(8 * (part->GetNumberOfParameters() + part->GetFixedParameters().Size()));
-  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); // failures are thrown, naming the file, not printed by HDF5
+  const QuietHdf5Errors quiet; // failures are thrown, naming the file, not printed by HDF5
   const Hdf5Handle access(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, "file access properties");
   if (H5Pset_libver_bounds(access.id(), H5F_LIBVER_V18, H5F_LIBVER_V18) < 0) throw std::runtime_error("HDF5 1.8 compatibility");
   Hdf5Handle h5(H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, access.id()), H5Fclose, "the file");

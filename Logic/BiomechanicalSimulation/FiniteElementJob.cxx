@@ -1,4 +1,5 @@
 #include "FiniteElementJob.h"
+#include "NumberText.h"
 
 #include <algorithm>
 #include <cmath>
@@ -154,7 +155,7 @@ void FiniteElementJob::validate() const
       fail("material " + std::to_string(m) + ": Young's modulus must be positive and finite");
     }
     if (!std::isfinite(mat.poissonRatio) || mat.poissonRatio < 0 || mat.poissonRatio >= 0.5) {
-      fail("material " + std::to_string(m) + ": Poisson ratio " + std::to_string(mat.poissonRatio) + " is outside [0, 0.5)");
+      fail("material " + std::to_string(m) + ": Poisson ratio " + numberText(mat.poissonRatio) + " is outside [0, 0.5)");
     }
   }
   for (double x : nodes) {
@@ -175,7 +176,7 @@ void FiniteElementJob::validate() const
     const double c[3] = {p[3][0] - p[0][0], p[3][1] - p[0][1], p[3][2] - p[0][2]};
     const double volume = (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
     if (!(volume > 0)) {
-      fail("tetrahedron " + std::to_string(t) + " is inverted or flat (volume " + std::to_string(volume) + " mm^3)");
+      fail("tetrahedron " + std::to_string(t) + " is inverted or flat (volume " + numberText(volume) + " mm^3)");
     }
   }
   if (fixedNodes.empty()) fail("no boundary conditions: the displacement is not determined (a singular system)");

@@ -14,6 +14,7 @@
 // Exit status: 0 solved, 2 bad job (options PETSc refuses or never reads included), 3 the solver
 // did not converge or its solution does not satisfy the equations (true residual), 1 anything else.
 #include "FiniteElementJob.h"
+#include "NumberText.h"
 
 #include <petscksp.h>
 
@@ -374,7 +375,7 @@ public:
     if (reason <= 0) {
       throw WorkerFailure(3, "the solver (" + result.solver + ") did not converge: KSP reason " + std::to_string(int(reason)) +
                                " after " + std::to_string(result.iterations) + " iterations, relative residual " +
-                               std::to_string(result.relativeResidual) + preconditionerFailure(reason));
+                               numberText(result.relativeResidual) + preconditionerFailure(reason));
     }
     requireTrueResidual(result);
     // The imposed values exactly (the solver met them only to its tolerance).

@@ -183,6 +183,10 @@ int TransformIOTest(int, char*[])
       rlimit limited = before;
       limited.rlim_cur = 256 * 1024;
       setrlimit(RLIMIT_FSIZE, &limited);
+      // HDF5's error printing is the process's: quiet while BrainShift writes, as it was after.
+      H5E_auto2_t printerBefore = nullptr;
+      void* printerDataBefore = nullptr;
+      H5Eget_auto2(H5E_DEFAULT, &printerBefore, &printerDataBefore);
       bool refused = false;
       std::string message;
       try {
@@ -195,6 +199,10 @@ int TransformIOTest(int, char*[])
       std::signal(SIGXFSZ, previousSignal);
       BS_CHECK_MSG(refused && message.find("cannot write " + kept.string()) != std::string::npos, message);
       BS_CHECK(fs::file_size(kept) == keptBytes);
+      H5E_auto2_t printerAfter = nullptr;
+      void* printerDataAfter = nullptr;
+      H5Eget_auto2(H5E_DEFAULT, &printerAfter, &printerDataAfter);
+      BS_CHECK(printerBefore != nullptr && printerAfter == printerBefore && printerDataAfter == printerDataBefore);
       for (const auto& entry : fs::directory_iterator(folder)) {
         BS_CHECK_MSG(entry.path().filename().string().rfind(".tmp-", 0) != 0, entry.path().string() + " was left behind");
       }
