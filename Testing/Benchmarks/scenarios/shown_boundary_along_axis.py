@@ -10,10 +10,13 @@ above the true one (preoperative brain left in the gap, or the sinking under-com
 evaluation.json's closest-point distances, an island of brain shown in the gap counts in full here, and
 so does a steep wall a little misplaced.
 
-    shown_boundary_along_axis.py RUN_DIR ...
+    shown_boundary_along_axis.py [--truth-main-piece] RUN_DIR ...
 
 prints per run: lines, signed mean, mean |d| and p95 |d| in mm, and the same in the rings 0-10, 10-20,
-20-25 and 25-30 mm from the axis. Needs numpy, scipy and nibabel.
+20-25 and 25-30 mm from the axis. --truth-main-piece: the true brain is its largest connected piece
+(face-connected voxels of labels 2-4); the pieces apart from it (where a finite element truth folds,
+its inverted field carries preoperative brain into the gap) are counted, their volume printed, and left
+out. Needs numpy, scipy and nibabel.
 """
 import os
 import re
@@ -45,10 +48,29 @@ def read_vector_nrrd(path):
     return np.frombuffer(data, dtype='<f4').reshape(sizes[::-1]), np.array(directions).T, origin
 
 
-def measure(run, step=0.25, length=90.0):
+def main_piece(labels, voxel_ml):
+    """The labels with the brain (2-4) outside its largest face-connected piece set to 0; how many
+    pieces were apart from it and their volume in ml."""
+    brain = (labels >= 2) & (labels <= 4)
+    pieces, count = ndimage.label(brain)
+    if count <= 1:
+        return labels, 0, 0.0
+    sizes = ndimage.sum(brain, pieces, range(1, count + 1))
+    apart = brain & (pieces != 1 + int(np.argmax(sizes)))
+    kept = labels.copy()
+    kept[apart] = 0
+    return kept, count - 1, float(apart.sum()) * voxel_ml
+
+
+def measure(run, step=0.25, length=90.0, truth_main_piece=False):
     starts, axis, radius = craniotomy_lines(run)
     truth = nib.load(os.path.join(run, 'case', 'truth', 'intraop_labels.nii.gz'))
-    true_entry = first_entries(np.asarray(truth.dataobj).astype(np.int16), np.linalg.inv(truth.affine), starts, axis, step, length)
+    true_labels = np.asarray(truth.dataobj).astype(np.int16)
+    apart = None
+    if truth_main_piece:
+        true_labels, pieces, ml = main_piece(true_labels, abs(np.linalg.det(truth.affine[:3, :3])) / 1000.0)
+        apart = (pieces, ml)
+    true_entry = first_entries(true_labels, np.linalg.inv(truth.affine), starts, axis, step, length)
 
     field, index_to_lps, origin = read_vector_nrrd(os.path.join(run, 'displacement_intraop_to_preop.nrrd'))
     preop = nib.load(os.path.join(run, 'case', 'preop_labels.nii.gz'))
@@ -63,7 +85,7 @@ def measure(run, step=0.25, length=90.0):
     shown_entry = np.where(brain.any(1), brain.argmax(1) * step, np.nan)
     d = true_entry - shown_entry
     measured = ~np.isnan(d)
-    return d[measured], radius[measured]
+    return d[measured], radius[measured], apart
 
 
 def summary(d):
@@ -73,8 +95,11 @@ def summary(d):
 if __name__ == '__main__':
     if len(sys.argv) < 2:
         sys.exit(__doc__)
-    for run in sys.argv[1:]:
-        d, radius = measure(run)
+    main_only = '--truth-main-piece' in sys.argv[1:]
+    for run in [a for a in sys.argv[1:] if a != '--truth-main-piece']:
+        d, radius, apart = measure(run, truth_main_piece=main_only)
+        if apart is not None:
+            print(f"{run}: the truth's brain in {apart[0] + 1} pieces; {apart[0]} apart from the largest ({apart[1]:.2f} ml) left out")
         print(f"{run}: {len(d)} lines, {summary(d)}")
         for low, high in [(0, 10), (10, 20), (20, 25), (25, 31)]:
             within = (radius >= low) & (radius < high)
