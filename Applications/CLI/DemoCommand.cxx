@@ -219,6 +219,10 @@ void runDemo(const DemoOptions& options)
                       {"seed", parameters.seed},
                       {"scenario", options.scenario},
                       {"shift_mm", parameters.shiftMillimetres}});
+  if (const auto folds = foldedTruthWarning(built.simulated.figures)) {
+    report.addWarning(*folds);
+    std::printf("warning: %s\n", folds->c_str());
+  }
   RunContext context(registrationOptionsFor(files, options.run), configuration, report);
   const RegistrationEnd end = registerCase(context);
 

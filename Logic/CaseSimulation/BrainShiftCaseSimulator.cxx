@@ -1547,6 +1547,18 @@ SimulatedCase simulateCase(const CaseParameters& P)
   return result;
 }
 
+std::optional<std::string> foldedTruthWarning(const CaseFigures& f)
+{
+  if (f.truthFoldedElements == 0 && f.minJacobianDeterminant > 0) return std::nullopt;
+  std::string what = "the truth's Jacobian determinant down to " + numberText(f.minJacobianDeterminant) + " in the brain";
+  if (f.truthFoldedElements > 0) {
+    what = std::to_string(f.truthFoldedElements) + " of its " + std::to_string(f.truthElements) + " finite elements inverted, " + what;
+  }
+  return "case: the truth folds (" + what + "): where it folds it is ill-defined, its inverse carrying preoperative brain where "
+         "there is none (pieces of brain in the gap), and the figures against it there (TRE, the boundary under the craniotomy) "
+         "measure the fold as well as the update";
+}
+
 void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs::path& folder)
 {
   const CaseFiles files(folder);
@@ -1611,6 +1623,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
                                                     simulated.intraopImage->GetLargestPossibleRegion().GetSize()[1],
                                                     simulated.intraopImage->GetLargestPossibleRegion().GetSize()[2]})},
       {"landmarks", simulated.landmarks.size()}}},
+    {"warnings", foldedTruthWarning(f) ? nlohmann::json::array({*foldedTruthWarning(f)}) : nlohmann::json::array()},
     {"landmarks",
      "chosen inside the intraoperative field of view only, at least 8 mm from its edges (a pair is one point seen in "
      "both images; with a slab, the brain outside it has none)"},

@@ -73,6 +73,18 @@ int CaseSimulationTruthTest(int, char*[])
     BS_CHECK_MSG(f.gapVolumeMl > 5.0, f.gapVolumeMl);
     BS_CHECK_MSG(f.cavityVolumeMl > 2.0, f.cavityVolumeMl);
     BS_CHECK_MSG(f.minJacobianDeterminant > 0.5, f.minJacobianDeterminant);
+    BS_CHECK_MSG(!foldedTruthWarning(f), *foldedTruthWarning(f)); // a truth that does not fold: no warning
+    // One that folds is said to, with its figures (lp15-fe-superficial-intact's).
+    CaseFigures folded = f;
+    folded.truthFoldedElements = 94;
+    folded.truthElements = 18270;
+    folded.minJacobianDeterminant = -1.6;
+    const std::optional<std::string> folds = foldedTruthWarning(folded);
+    BS_CHECK(folds && folds->find("94 of its 18270 finite elements inverted") != std::string::npos &&
+             folds->find("down to -1.6 ") != std::string::npos && folds->find("ill-defined") != std::string::npos);
+    folded.truthFoldedElements = 0; // a kinematic truth whose determinant is not positive
+    folded.minJacobianDeterminant = 0;
+    BS_CHECK(foldedTruthWarning(folded) && foldedTruthWarning(folded)->find("inverted") == std::string::npos);
     BS_CHECK_MSG(f.tumourVolumeMl > 3.0 && f.tumourVolumeMl < 10.0, f.tumourVolumeMl);
     BS_CHECK_MSG(f.ventricleVolumeMl > 5.0 && f.ventricleVolumeMl < 40.0, f.ventricleVolumeMl);
 
