@@ -49,12 +49,19 @@ def load(path):
         return None
 
 
+def truth_folds(case):
+    """Whether the case's truth folds (finite elements inverted, or its Jacobian determinant not
+    positive in the brain; case.json's warnings say so): figures near the fold measure it too."""
+    f = case.get("figures", {})
+    return bool(f.get("truth_folded_elements", 0) or f.get("min_jacobian_determinant", 1.0) <= 0)
+
+
 def row_of(scenario, method, tre, case, seconds=None, extra=None):
     p = case["parameters"]
     row = {"scenario": scenario, "method": method, "shift_mm": p["shift_mm"], "craniotomy": p["craniotomy"],
            "resection": p["resection"], "contrast": p.get("contrast", "t1"), "tumour": p.get("tumour_appearance", ""),
            "gap": p.get("gap", "dark"), "noise": p["noise_fraction"], "bias": p["bias_strength"],
-           "truth": p.get("truth", "kinematic"),
+           "truth": p.get("truth", "kinematic"), "truth_folds": truth_folds(case),
            "tre_mean_mm": tre["mean_mm"] if tre else None, "tre_p95_mm": tre["p95_mm"] if tre else None,
            "tre_max_mm": tre["max_mm"] if tre else None,
            "tre_craniotomy_mm": group_mean(tre, ("craniotomy",)), "tre_margin_mm": group_mean(tre, MARGIN_GROUPS),
@@ -200,7 +207,9 @@ def main():
              "boundary_under_craniotomy (the demo's rows only): from the true points mean |d| / p95; from the shown points "
              "mean |d| (what the transform shows that is not there, e.g. preoperative brain left in the gap); both ways "
              "(the average symmetric surface distance), in mm. Target: both ways <= 1.0 (from the true points where "
-             "the run predates the other direction).", ""]
+             "the run predates the other direction). A scenario marked * has a truth that folds (case.json's warnings: "
+             "finite elements inverted, or its Jacobian determinant not positive in the brain): near the fold its figures "
+             "measure the truth's fold as well as the update.", ""]
     if kept_methods:
         lines += ["Not re-run here, kept from the previous scenarios.csv (an earlier run, perhaps of an earlier head): "
                   + ", ".join(kept_methods) + ".", ""]
@@ -213,7 +222,8 @@ def main():
                     else f"{fmt(r['craniotomy_boundary_mm'])} / {fmt(r['craniotomy_boundary_p95_mm'])}")
         if r.get("craniotomy_boundary_both_ways_mm") not in (None, ""):
             boundary += f"; {fmt(r['craniotomy_boundary_from_shown_mm'])}; {fmt(r['craniotomy_boundary_both_ways_mm'])}"
-        lines.append(f"| {r['scenario']} | {fmt(r['shift_mm'], 0)} | {r['contrast']} | {'yes' if r['resection'] else 'no'} | "
+        folds = " *" if str(r.get("truth_folds")) == "True" else ""
+        lines.append(f"| {r['scenario']}{folds} | {fmt(r['shift_mm'], 0)} | {r['contrast']} | {'yes' if r['resection'] else 'no'} | "
                      f"{r['method']} | {tre} | {fmt(r['tre_craniotomy_mm'])} | {fmt(r['tre_margin_mm'])} | "
                      f"{fmt(r['tre_brain_mm'])} | {fmt(r['tre_head_mm'])} | {boundary} | {fmt(r.get('brain_dice'), 3)} | "
                      f"{r.get('trust') or ''} | {fmt(r['wall_seconds'], 1)} |")
