@@ -63,14 +63,15 @@ private:
 };
 
 /// HDF5's printing of its error stack off while this lives (the failures are thrown, naming the
-/// file), and what the process had before put back after it: other HDF5 users (ITK's reader) keep
-/// their own handling.
+/// file), and the handler this thread had before (function and data) put back after it: other HDF5
+/// users (ITK's reader, the command line's own setting) keep theirs. A handler HDF5 cannot report
+/// (one set through the old H5Eset_auto1) is left alone.
 class QuietHdf5Errors {
 public:
   QuietHdf5Errors()
   {
     restore_ = H5Eget_auto2(H5E_DEFAULT, &printer_, &data_) >= 0;
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    if (restore_) H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
   }
   ~QuietHdf5Errors()
   {

@@ -1549,14 +1549,14 @@ SimulatedCase simulateCase(const CaseParameters& P)
 
 std::optional<std::string> foldedTruthWarning(const CaseFigures& f)
 {
-  if (f.truthFoldedElements == 0 && f.minJacobianDeterminant > 0) return std::nullopt;
-  std::string what = "the truth's Jacobian determinant down to " + numberText(f.minJacobianDeterminant) + " in the brain";
+  if (f.minJacobianDeterminant > 0) return std::nullopt; // elements a linear solve inverted, but a field that does not fold
+  std::string what = "its Jacobian determinant down to " + numberText(f.minJacobianDeterminant) + " in the brain";
   if (f.truthFoldedElements > 0) {
-    what = std::to_string(f.truthFoldedElements) + " of its " + std::to_string(f.truthElements) + " finite elements inverted, " + what;
+    what += ", " + std::to_string(f.truthFoldedElements) + " of its " + std::to_string(f.truthElements) + " finite elements inverted";
   }
-  return "case: the truth folds (" + what + "): where it folds it is ill-defined, its inverse carrying preoperative brain where "
-         "there is none (pieces of brain in the gap), and the figures against it there (TRE, the boundary under the craniotomy) "
-         "measure the fold as well as the update";
+  return "case: the truth folds (" + what + "): where it folds it is ill-defined, the inverted field carrying preoperative brain "
+         "where there is none (pieces of brain in the gap), and the figures against it there (TRE, the boundary under the "
+         "craniotomy) measure the fold as well as the update";
 }
 
 void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs::path& folder)

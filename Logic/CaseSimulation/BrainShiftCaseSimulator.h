@@ -159,11 +159,12 @@ struct SimulatedCase {
 /// Builds the case. InputError if the template is missing or the parameters are invalid.
 SimulatedCase simulateCase(const CaseParameters& parameters);
 
-/// A truth that folds (finite elements inverted by the linear solution, or the truth's Jacobian
-/// determinant not positive somewhere in the brain) is ill-defined where it folds: its inverse
-/// carries preoperative brain where there is none (lp15-fe-superficial-intact: pieces of "brain"
-/// in the gap under the craniotomy), and figures against it there measure the fold as well as the
-/// update. The warning that says so, with the figures; none for a truth that does not fold.
+/// A truth that folds (its Jacobian determinant not positive somewhere in the brain) is
+/// ill-defined where it folds: the inverted field carries preoperative brain where there is none
+/// (lp15-fe-superficial-intact: pieces of "brain" in the gap under the craniotomy), and figures
+/// against it there measure the fold as well as the update. The warning that says so, with the
+/// figures (and the finite elements the linear solve inverted); none for a truth that does not
+/// fold (rf10-fe-sliding: 15 elements inverted, the field's determinant at least 0.20).
 std::optional<std::string> foldedTruthWarning(const CaseFigures& figures);
 
 /// Where a case's files are, inside its folder.

@@ -50,10 +50,9 @@ def load(path):
 
 
 def truth_folds(case):
-    """Whether the case's truth folds (finite elements inverted, or its Jacobian determinant not
-    positive in the brain; case.json's warnings say so): figures near the fold measure it too."""
-    f = case.get("figures", {})
-    return bool(f.get("truth_folded_elements", 0) or f.get("min_jacobian_determinant", 1.0) <= 0)
+    """Whether the case's truth folds (its Jacobian determinant not positive in the brain; case.json's
+    warnings say so): figures near the fold measure it too."""
+    return case.get("figures", {}).get("min_jacobian_determinant", 1.0) <= 0
 
 
 def row_of(scenario, method, tre, case, seconds=None, extra=None):
@@ -208,21 +207,22 @@ def main():
              "mean |d| (what the transform shows that is not there, e.g. preoperative brain left in the gap); both ways "
              "(the average symmetric surface distance), in mm. Target: both ways <= 1.0 (from the true points where "
              "the run predates the other direction). A scenario marked * has a truth that folds (case.json's warnings: "
-             "finite elements inverted, or its Jacobian determinant not positive in the brain): near the fold its figures "
-             "measure the truth's fold as well as the update.", ""]
+             "its Jacobian determinant not positive in the brain): near the fold its figures measure the truth's fold as "
+             "well as the update.", ""]
     if kept_methods:
         lines += ["Not re-run here, kept from the previous scenarios.csv (an earlier run, perhaps of an earlier head): "
                   + ", ".join(kept_methods) + ".", ""]
     lines += ["| scenario | shift | contrast | resection | method | TRE mean / p95 / max | craniotomy | margin | brain | head | "
               "boundary under craniotomy | brain Dice | trust | s |",
               "|---|---:|---|---|---|---|---:|---:|---:|---:|---|---:|---|---:|"]
+    folding = {r["scenario"] for r in rows if str(r.get("truth_folds")) == "True"}  # rows kept from before lack it
     for r in rows:
         tre = f"{fmt(r['tre_mean_mm'])} / {fmt(r['tre_p95_mm'])} / {fmt(r['tre_max_mm'])}"
         boundary = ("" if r.get("craniotomy_boundary_mm") is None
                     else f"{fmt(r['craniotomy_boundary_mm'])} / {fmt(r['craniotomy_boundary_p95_mm'])}")
         if r.get("craniotomy_boundary_both_ways_mm") not in (None, ""):
             boundary += f"; {fmt(r['craniotomy_boundary_from_shown_mm'])}; {fmt(r['craniotomy_boundary_both_ways_mm'])}"
-        folds = " *" if str(r.get("truth_folds")) == "True" else ""
+        folds = " *" if r["scenario"] in folding else ""
         lines.append(f"| {r['scenario']}{folds} | {fmt(r['shift_mm'], 0)} | {r['contrast']} | {'yes' if r['resection'] else 'no'} | "
                      f"{r['method']} | {tre} | {fmt(r['tre_craniotomy_mm'])} | {fmt(r['tre_margin_mm'])} | "
                      f"{fmt(r['tre_brain_mm'])} | {fmt(r['tre_head_mm'])} | {boundary} | {fmt(r.get('brain_dice'), 3)} | "

@@ -49,17 +49,32 @@ def read_vector_nrrd(path):
 
 
 def main_piece(labels, voxel_ml):
-    """The labels with the brain (2-4) outside its largest face-connected piece set to 0; how many
-    pieces were apart from it and their volume in ml."""
+    """The labels with the brain (2-4) outside its largest face-connected piece set to 0; the pieces
+    (label volume, 0 outside the brain) and the largest one's label; how many pieces were apart from
+    it and their volume in ml."""
     brain = (labels >= 2) & (labels <= 4)
     pieces, count = ndimage.label(brain)
     if count <= 1:
-        return labels, 0, 0.0
+        return labels, pieces, 1, 0, 0.0
     sizes = ndimage.sum(brain, pieces, range(1, count + 1))
-    apart = brain & (pieces != 1 + int(np.argmax(sizes)))
+    largest = 1 + int(np.argmax(sizes))
+    apart = brain & (pieces != largest)
     kept = labels.copy()
     kept[apart] = 0
-    return kept, count - 1, float(apart.sum()) * voxel_ml
+    return kept, pieces, largest, count - 1, float(apart.sum()) * voxel_ml
+
+
+def pieces_entered_first(pieces, largest, ras_to_voxel, starts, axis, step, length):
+    """Of the pieces apart from the largest, those some line enters first (and how many lines)."""
+    s = np.arange(0.0, length, step)
+    points = starts[:, None, :] - s[None, :, None] * axis[None, None, :]
+    ras = (points * np.array([-1, -1, 1])).reshape(-1, 3).T
+    voxels = ras_to_voxel[:3, :3] @ ras + ras_to_voxel[:3, 3:4]
+    v = ndimage.map_coordinates(pieces, voxels, order=0, mode='constant', cval=0).reshape(len(starts), len(s))
+    inside = v > 0
+    first = v[np.arange(len(starts)), inside.argmax(1)]
+    first = first[inside.any(1) & (first != largest)]
+    return len(np.unique(first)), len(first)
 
 
 def measure(run, step=0.25, length=90.0, truth_main_piece=False):
@@ -68,8 +83,8 @@ def measure(run, step=0.25, length=90.0, truth_main_piece=False):
     true_labels = np.asarray(truth.dataobj).astype(np.int16)
     apart = None
     if truth_main_piece:
-        true_labels, pieces, ml = main_piece(true_labels, abs(np.linalg.det(truth.affine[:3, :3])) / 1000.0)
-        apart = (pieces, ml)
+        true_labels, pieces, largest, count, ml = main_piece(true_labels, abs(np.linalg.det(truth.affine[:3, :3])) / 1000.0)
+        apart = (count, ml) + pieces_entered_first(pieces, largest, np.linalg.inv(truth.affine), starts, axis, step, length)
     true_entry = first_entries(true_labels, np.linalg.inv(truth.affine), starts, axis, step, length)
 
     field, index_to_lps, origin = read_vector_nrrd(os.path.join(run, 'displacement_intraop_to_preop.nrrd'))
@@ -96,10 +111,14 @@ if __name__ == '__main__':
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     main_only = '--truth-main-piece' in sys.argv[1:]
-    for run in [a for a in sys.argv[1:] if a != '--truth-main-piece']:
+    runs = [a for a in sys.argv[1:] if a != '--truth-main-piece']
+    if not runs:
+        sys.exit(__doc__)
+    for run in runs:
         d, radius, apart = measure(run, truth_main_piece=main_only)
         if apart is not None:
-            print(f"{run}: the truth's brain in {apart[0] + 1} pieces; {apart[0]} apart from the largest ({apart[1]:.2f} ml) left out")
+            print(f"{run}: {apart[0]} pieces of the truth's brain apart from the largest ({apart[1]:.2f} ml), left out; "
+                  f"{apart[2]} of them entered first by {apart[3]} lines")
         print(f"{run}: {len(d)} lines, {summary(d)}")
         for low, high in [(0, 10), (10, 20), (20, 25), (25, 31)]:
             within = (radius >= low) & (radius < high)
