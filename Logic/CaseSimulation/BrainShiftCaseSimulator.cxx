@@ -1572,6 +1572,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
   writeLandmarksCsv(simulated.landmarks, files.landmarks);
 
   const CaseFigures& f = simulated.figures;
+  const std::optional<std::string> folds = foldedTruthWarning(f);
   auto point = [](const PhysicalPoint& p) { return nlohmann::json::array({p[0], p[1], p[2]}); };
   nlohmann::json description = {
     {"description", "BrainShift built-in case: Colin27 T1 with a simulated brain shift of known truth"},
@@ -1623,7 +1624,7 @@ void writeCase(const SimulatedCase& simulated, const CaseParameters& P, const fs
                                                     simulated.intraopImage->GetLargestPossibleRegion().GetSize()[1],
                                                     simulated.intraopImage->GetLargestPossibleRegion().GetSize()[2]})},
       {"landmarks", simulated.landmarks.size()}}},
-    {"warnings", foldedTruthWarning(f) ? nlohmann::json::array({*foldedTruthWarning(f)}) : nlohmann::json::array()},
+    {"warnings", folds ? nlohmann::json::array({*folds}) : nlohmann::json::array()},
     {"landmarks",
      "chosen inside the intraoperative field of view only, at least 8 mm from its edges (a pair is one point seen in "
      "both images; with a slab, the brain outside it has none)"},

@@ -74,8 +74,15 @@ void RunReport::replaceWarnings(const std::string& source, const std::vector<std
     }
     document_["warnings"] = std::move(kept);
   }
-  addWarnings(warnings);
-  earlier = warnings;
+  // Only what this source adds is its own: a warning another step gave already stays when this one
+  // replaces its own.
+  earlier.clear();
+  auto& all = document_["warnings"];
+  for (const auto& w : warnings) {
+    if (std::find(all.begin(), all.end(), w) != all.end()) continue;
+    all.push_back(w);
+    earlier.push_back(w);
+  }
 }
 
 std::size_t RunReport::withdrawWarnings(const std::string& prefix)

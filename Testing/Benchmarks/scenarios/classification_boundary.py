@@ -33,12 +33,18 @@ def euler_transform(path):
     return rz @ rx @ ry, np.array(fixed[:3]), np.array(p[3:6])
 
 
-def first_entries(labels, ras_to_voxel, starts_lps, axis, step=0.25, length=90.0):
+def sample_lines(volume, ras_to_voxel, starts_lps, axis, step=0.25, length=90.0):
+    """`volume` (nearest voxel, 0 outside) every `step` mm along each line from its start along
+    minus `axis`: an array of lines x samples."""
     s = np.arange(0.0, length, step)
     points = starts_lps[:, None, :] - s[None, :, None] * axis[None, None, :]
     ras = (points * np.array([-1, -1, 1])).reshape(-1, 3).T
     voxels = ras_to_voxel[:3, :3] @ ras + ras_to_voxel[:3, 3:4]
-    v = ndimage.map_coordinates(labels, voxels, order=0, mode='constant', cval=0).reshape(len(starts_lps), len(s))
+    return ndimage.map_coordinates(volume, voxels, order=0, mode='constant', cval=0).reshape(len(starts_lps), len(s))
+
+
+def first_entries(labels, ras_to_voxel, starts_lps, axis, step=0.25, length=90.0):
+    v = sample_lines(labels, ras_to_voxel, starts_lps, axis, step, length)
     brain = (v >= 2) & (v <= 4)
     return np.where(brain.any(1), brain.argmax(1) * step, np.nan)
 

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import ndimage
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from classification_boundary import craniotomy_lines, first_entries  # noqa: E402
+from classification_boundary import craniotomy_lines, first_entries, sample_lines  # noqa: E402
 
 
 def read_vector_nrrd(path):
@@ -66,11 +66,7 @@ def main_piece(labels, voxel_ml):
 
 def pieces_entered_first(pieces, largest, ras_to_voxel, starts, axis, step, length):
     """Of the pieces apart from the largest, those some line enters first (and how many lines)."""
-    s = np.arange(0.0, length, step)
-    points = starts[:, None, :] - s[None, :, None] * axis[None, None, :]
-    ras = (points * np.array([-1, -1, 1])).reshape(-1, 3).T
-    voxels = ras_to_voxel[:3, :3] @ ras + ras_to_voxel[:3, 3:4]
-    v = ndimage.map_coordinates(pieces, voxels, order=0, mode='constant', cval=0).reshape(len(starts), len(s))
+    v = sample_lines(pieces, ras_to_voxel, starts, axis, step, length)
     inside = v > 0
     first = v[np.arange(len(starts)), inside.argmax(1)]
     first = first[inside.any(1) & (first != largest)]
