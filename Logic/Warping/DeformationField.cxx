@@ -1,11 +1,9 @@
 #include "DeformationField.h"
 
+#include "AffineResampling.h"
 #include "ParallelRanges.h"
 
-#include <itkLinearInterpolateImageFunction.h>
-#include <itkNearestNeighborInterpolateImageFunction.h>
 #include <itkSmoothingRecursiveGaussianImageFilter.h>
-#include <itkWarpImageFilter.h>
 
 // ITK brings its own Eigen; a second copy in the same translation unit clashes.
 #include <itk_eigen.h>
@@ -661,31 +659,24 @@ DisplacementFieldImage::Pointer linearTransformField(const SpatialTransform& tra
 }
 
 namespace {
-template <class TImage, class TInterpolator>
-typename TImage::Pointer warp(const TImage& moving, const DisplacementFieldImage& field)
+/// `values` (x fastest) as an image on `field`'s grid.
+template <class TImage>
+typename TImage::Pointer imageOnFieldGrid(const std::vector<typename TImage::PixelType>& values, const DisplacementFieldImage& field)
 {
-  using Warper = itk::WarpImageFilter<TImage, TImage, DisplacementFieldImage>;
-  auto warper = Warper::New();
-  warper->SetInput(&moving);
-  warper->SetDisplacementField(&field);
-  warper->SetInterpolator(TInterpolator::New());
-  warper->SetOutputParametersFromImage(&field);
-  warper->SetEdgePaddingValue(0);
-  warper->Update();
-  typename TImage::Pointer out = warper->GetOutput();
-  out->DisconnectPipeline();
-  return out;
+  typename TImage::Pointer image = ImageGeometry::of(&field).allocate<TImage>();
+  std::copy(values.begin(), values.end(), image->GetBufferPointer());
+  return image;
 }
 } // namespace
 
 ScalarImage::Pointer warpScalarVolume(const ScalarImage& moving, const DisplacementFieldImage& field)
 {
-  return warp<ScalarImage, itk::LinearInterpolateImageFunction<ScalarImage, double>>(moving, field);
+  return imageOnFieldGrid<ScalarImage>(linearlyWarped(moving, field), field);
 }
 
 LabelImage::Pointer warpLabelVolume(const LabelImage& moving, const DisplacementFieldImage& field)
 {
-  return warp<LabelImage, itk::NearestNeighborInterpolateImageFunction<LabelImage, double>>(moving, field);
+  return imageOnFieldGrid<LabelImage>(nearestWarped(moving, field), field);
 }
 
 } // namespace brainshift

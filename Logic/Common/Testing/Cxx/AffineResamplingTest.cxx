@@ -5,7 +5,8 @@
 // (the continuous index is computed per voxel where the filter accumulates it along a row), the
 // same voxels inside. Nearest: the same label at every voxel but where the continuous index lies
 // within 1e-6 of a half (rounding may go either way there), and those few. A transform that is not
-// linear is refused.
+// linear is refused. linearlyWarped and nearestWarped against ITK's WarpImageFilter the same way,
+// through a smooth field of up to 6 mm that carries part of the grid outside the image.
 #include "AffineResampling.h"
 #include "BrainShiftTestingSupport.h"
 #include "SyntheticData.h"
@@ -16,6 +17,7 @@
 #include <itkLinearInterpolateImageFunction.h>
 #include <itkNearestNeighborInterpolateImageFunction.h>
 #include <itkResampleImageFilter.h>
+#include <itkWarpImageFilter.h>
 
 #include <cmath>
 #include <iostream>
@@ -61,25 +63,52 @@ double distanceFromHalf(const Image& image, const ImageGeometry& grid, const Spa
   return nearest;
 }
 
-void compare(const ScalarImage& image, const LabelImage& labels, const ImageGeometry& grid, const SpatialTransform* transform, const char* name)
+template <class Image, class Interpolator>
+typename Image::Pointer itkWarped(const Image& image, const DisplacementFieldImage& field)
 {
-  const std::vector<float> linear = linearlyResampled(image, grid, transform);
-  const ScalarImage::Pointer expected = itkResampled<ScalarImage, itk::LinearInterpolateImageFunction<ScalarImage, double>>(image, grid, transform);
-  const std::vector<LabelPixel> nearest = nearestResampled(labels, grid, transform);
-  const LabelImage::Pointer expectedLabels =
-    itkResampled<LabelImage, itk::NearestNeighborInterpolateImageFunction<LabelImage, double>>(labels, grid, transform);
-  const std::size_t n = grid.numberOfVoxels();
+  auto filter = itk::WarpImageFilter<Image, Image, DisplacementFieldImage>::New();
+  filter->SetInput(&image);
+  filter->SetDisplacementField(&field);
+  filter->SetInterpolator(Interpolator::New());
+  filter->SetOutputParametersFromImage(&field);
+  filter->SetEdgePaddingValue(0);
+  filter->Update();
+  return filter->GetOutput();
+}
+
+/// The grid's voxel's continuous index in `image`, at its point moved by the field.
+template <class Image>
+double warpedDistanceFromHalf(const Image& image, const DisplacementFieldImage& field, std::size_t voxel)
+{
+  const auto size = field.GetLargestPossibleRegion().GetSize();
+  const itk::Index<3> index = {{itk::IndexValueType(voxel % size[0]), itk::IndexValueType((voxel / size[0]) % size[1]),
+                                itk::IndexValueType(voxel / (size[0] * size[1]))}};
+  PhysicalPoint p;
+  field.TransformIndexToPhysicalPoint(index, p);
+  for (unsigned r = 0; r < 3; ++r) p[r] += field.GetBufferPointer()[voxel][r];
+  const auto c = image.template TransformPhysicalPointToContinuousIndex<double>(p);
+  double nearest = 1;
+  for (int a = 0; a < 3; ++a) nearest = std::min(nearest, std::abs(c[a] - std::floor(c[a]) - 0.5));
+  return nearest;
+}
+
+/// Our values against the filter's over the grid: linear within 1e-4, the same voxels inside, the
+/// same labels but where the continuous index lies within 1e-6 of a half (`nearHalf`), and those few.
+template <class NearHalf>
+void compareValues(const std::vector<float>& linear, const ScalarImage& expected, const std::vector<LabelPixel>& nearest,
+                   const LabelImage& expectedLabels, std::size_t n, NearHalf nearHalf, const char* name)
+{
   BS_CHECK_MSG(linear.size() == n && nearest.size() == n, linear.size() << " " << nearest.size() << " of " << n);
   double largest = 0;
   std::size_t inside = 0, insideOnlyOne = 0, labelsDiffer = 0, labelsAtHalf = 0;
   for (std::size_t v = 0; v < n; ++v) {
-    const float e = expected->GetBufferPointer()[v];
+    const float e = expected.GetBufferPointer()[v];
     largest = std::max(largest, double(std::abs(linear[v] - e)));
     inside += e != 0;
     insideOnlyOne += (e != 0) != (linear[v] != 0);
-    if (nearest[v] != expectedLabels->GetBufferPointer()[v]) {
+    if (nearest[v] != expectedLabels.GetBufferPointer()[v]) {
       ++labelsDiffer;
-      labelsAtHalf += distanceFromHalf(labels, grid, transform, v) < 1e-6;
+      labelsAtHalf += nearHalf(v);
     }
   }
   std::cout << name << ": " << n << " voxels, " << inside << " inside; linear largest difference " << largest << ", inside for one only "
@@ -89,6 +118,24 @@ void compare(const ScalarImage& image, const LabelImage& labels, const ImageGeom
   BS_CHECK_MSG(insideOnlyOne == 0, insideOnlyOne);
   BS_CHECK_MSG(labelsDiffer == labelsAtHalf, labelsDiffer << " differ, " << labelsAtHalf << " at a half");
   BS_CHECK_MSG(labelsDiffer <= n / 10000, labelsDiffer);
+}
+
+void compareWarped(const ScalarImage& image, const LabelImage& labels, const DisplacementFieldImage& field)
+{
+  const ScalarImage::Pointer expected = itkWarped<ScalarImage, itk::LinearInterpolateImageFunction<ScalarImage, double>>(image, field);
+  const LabelImage::Pointer expectedLabels = itkWarped<LabelImage, itk::NearestNeighborInterpolateImageFunction<LabelImage, double>>(labels, field);
+  compareValues(linearlyWarped(image, field), *expected, nearestWarped(labels, field), *expectedLabels,
+                field.GetLargestPossibleRegion().GetNumberOfPixels(),
+                [&](std::size_t v) { return warpedDistanceFromHalf(labels, field, v) < 1e-6; }, "warped");
+}
+
+void compare(const ScalarImage& image, const LabelImage& labels, const ImageGeometry& grid, const SpatialTransform* transform, const char* name)
+{
+  const ScalarImage::Pointer expected = itkResampled<ScalarImage, itk::LinearInterpolateImageFunction<ScalarImage, double>>(image, grid, transform);
+  const LabelImage::Pointer expectedLabels =
+    itkResampled<LabelImage, itk::NearestNeighborInterpolateImageFunction<LabelImage, double>>(labels, grid, transform);
+  compareValues(linearlyResampled(image, grid, transform), *expected, nearestResampled(labels, grid, transform), *expectedLabels,
+                grid.numberOfVoxels(), [&](std::size_t v) { return distanceFromHalf(labels, grid, transform, v) < 1e-6; }, name);
 }
 } // namespace
 
@@ -132,5 +179,33 @@ int AffineResamplingTest(int, char*[])
 
     auto field = itk::DisplacementFieldTransform<double, 3>::New();
     BS_CHECK_THROWS(linearlyResampled(*image, onto, field.GetPointer()), std::invalid_argument, "not linear");
+
+    // Through a displacement field on an oblique grid of its own: smooth, up to 6 mm, so that
+    // part of the grid lands outside the image and part of the outside lands in it.
+    const ImageGeometry fieldGrid =
+      testing::grid({{48, 44, 30}}, {1.0, 1.1, 1.6}, testing::point(-27, -24, -28), testing::rotationAbout(-0.2, 0.4, 1.0, 9));
+    const DisplacementFieldImage::Pointer displacement = fieldGrid.allocate<DisplacementFieldImage>();
+    for (std::size_t v = 0, n = fieldGrid.numberOfVoxels(); v < n; ++v) {
+      const itk::Index<3> index = {{itk::IndexValueType(v % fieldGrid.size[0]), itk::IndexValueType((v / fieldGrid.size[0]) % fieldGrid.size[1]),
+                                    itk::IndexValueType(v / (fieldGrid.size[0] * fieldGrid.size[1]))}};
+      PhysicalPoint p;
+      displacement->TransformIndexToPhysicalPoint(index, p);
+      DisplacementVector& d = displacement->GetBufferPointer()[v];
+      d[0] = float(6 * std::sin(0.11 * p[1] + 0.3));
+      d[1] = float(4 * std::cos(0.09 * p[2] - 0.1) - 1.5);
+      d[2] = float(3 * std::sin(0.07 * p[0]) + 0.25 * std::cos(0.2 * p[1]));
+    }
+    compareWarped(*image, *labels, *displacement);
+    // A zero field on the image's own grid: every voxel its own value and label.
+    const DisplacementFieldImage::Pointer zero = imageGrid.allocate<DisplacementFieldImage>();
+    zero->FillBuffer(DisplacementVector(0.0f));
+    const std::vector<float> unmoved = linearlyWarped(*image, *zero);
+    const std::vector<LabelPixel> unmovedLabels = nearestWarped(*labels, *zero);
+    std::size_t moved = 0;
+    for (std::size_t v = 0; v < unmoved.size(); ++v) {
+      moved += unmoved[v] != image->GetBufferPointer()[v] || unmovedLabels[v] != labels->GetBufferPointer()[v];
+    }
+    BS_CHECK_MSG(moved == 0, moved);
+    BS_CHECK_THROWS(linearlyWarped(*image, *DisplacementFieldImage::New()), std::invalid_argument, "no whole buffer");
   });
 }
