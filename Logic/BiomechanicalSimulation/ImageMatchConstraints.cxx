@@ -79,6 +79,75 @@ std::optional<std::array<double, 3>> MeshPointLocator::interpolate(const std::ve
   return value;
 }
 
+std::optional<PredictedDisplacement> MeshPointLocator::interpolateWithGradient(const std::vector<double>& nodal,
+                                                                               const std::vector<double>& nodalGradient,
+                                                                               const PhysicalPoint& point) const
+{
+  const auto location = locate(point);
+  if (!location) return std::nullopt;
+  const vtkIdType* ids = nullptr;
+  vtkIdType count = 0;
+  impl_->mesh->GetCellPoints(location->tetrahedron, count, ids);
+  PredictedDisplacement result;
+  std::array<std::array<double, 3>, 3> gradient{};
+  for (vtkIdType k = 0; k < count && k < 4; ++k) {
+    const double w = location->weights[std::size_t(k)];
+    for (std::size_t a = 0; a < 3; ++a) {
+      result.displacement[a] += w * nodal[3 * std::size_t(ids[k]) + a];
+      for (std::size_t b = 0; b < 3; ++b) gradient[a][b] += w * nodalGradient[9 * std::size_t(ids[k]) + 3 * a + b];
+    }
+  }
+  result.gradient = gradient;
+  return result;
+}
+
+std::vector<double> nodalGradients(vtkUnstructuredGrid* mesh, const std::vector<double>& nodal)
+{
+  const vtkIdType nodes = mesh->GetNumberOfPoints();
+  if (nodal.size() != 3 * std::size_t(nodes)) throw std::invalid_argument("nodal gradients: three values per node are needed");
+  std::vector<double> sums(9 * std::size_t(nodes), 0.0), volumes(std::size_t(nodes), 0.0);
+  const vtkIdType* ids = nullptr;
+  vtkIdType count = 0;
+  for (vtkIdType cell = 0; cell < mesh->GetNumberOfCells(); ++cell) {
+    mesh->GetCellPoints(cell, count, ids);
+    if (count != 4) continue;
+    // Linear in the tetrahedron: G E = F, E's columns its edges from its first node, F's the
+    // field's differences along them.
+    double x[4][3], E[3][3], F[3][3];
+    for (int k = 0; k < 4; ++k) mesh->GetPoint(ids[k], x[k]);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        E[r][c] = x[c + 1][r] - x[0][r];
+        F[r][c] = nodal[3 * std::size_t(ids[c + 1]) + std::size_t(r)] - nodal[3 * std::size_t(ids[0]) + std::size_t(r)];
+      }
+    const double det = E[0][0] * (E[1][1] * E[2][2] - E[1][2] * E[2][1]) - E[0][1] * (E[1][0] * E[2][2] - E[1][2] * E[2][0]) +
+                       E[0][2] * (E[1][0] * E[2][1] - E[1][1] * E[2][0]);
+    const double volume = std::abs(det) / 6.0;
+    if (!(volume > 1e-9)) continue; // degenerate (mm^3)
+    double inverse[3][3];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        const int r1 = (c + 1) % 3, r2 = (c + 2) % 3, c1 = (r + 1) % 3, c2 = (r + 2) % 3;
+        inverse[r][c] = (E[r1][c1] * E[r2][c2] - E[r1][c2] * E[r2][c1]) / det; // the cofactors, transposed
+      }
+    double G[9] = {};
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c)
+        for (int m = 0; m < 3; ++m) G[3 * r + c] += F[r][m] * inverse[m][c];
+    for (int k = 0; k < 4; ++k) {
+      const std::size_t node = std::size_t(ids[k]);
+      for (int g = 0; g < 9; ++g) sums[9 * node + std::size_t(g)] += volume * G[g];
+      volumes[node] += volume;
+    }
+  }
+  for (std::size_t node = 0; node < std::size_t(nodes); ++node) {
+    if (volumes[node] > 0) {
+      for (int g = 0; g < 9; ++g) sums[9 * node + std::size_t(g)] /= volumes[node];
+    }
+  }
+  return sums;
+}
+
 std::array<double, 6> matchStiffness(const BlockMatch& match, double stiffnessNPerMm)
 {
   const double confidence = std::max(match.similarity, 0.0);
@@ -116,6 +185,7 @@ BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configu
   p.maximumBlocks = std::size_t(c.maximumBlocks);
   p.searchRadiusMm = c.searchRadiusMm;
   p.minimumSimilarity = c.minimumSimilarity;
+  p.deformedWindows = c.deformedWindows;
   if (tumourResected) p.excludedLabels = {4};
   return p;
 }
@@ -175,8 +245,13 @@ ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteEl
   ImageDrivenSolve out;
   out.result = surfaceOnly;
   const MeshPointLocator locator(mesh);
-  const DisplacementPrediction prediction = [&](const PhysicalPoint& x) {
-    return locator.interpolate(surfaceOnly.displacements, x).value_or(std::array<double, 3>{0, 0, 0});
+  const std::vector<double> gradients = configuration.blockMatching.deformedWindows ? nodalGradients(mesh, surfaceOnly.displacements) : std::vector<double>{};
+  const DisplacementPrediction prediction = [&](const PhysicalPoint& x) -> std::optional<PredictedDisplacement> {
+    if (gradients.empty()) {
+      const auto displacement = locator.interpolate(surfaceOnly.displacements, x);
+      return displacement ? std::optional<PredictedDisplacement>(PredictedDisplacement{*displacement, std::nullopt}) : std::nullopt;
+    }
+    return locator.interpolateWithGradient(surfaceOnly.displacements, gradients, x);
   };
   BlockMatchingParameters parameters = blockMatchingParametersFrom(configuration, in.tumourResected);
   parameters.largestPredictedMm = std::min(largestDisplacement(surfaceOnly.displacements), 200.0);

@@ -258,33 +258,45 @@ public:
           if (i < 0 || j < 0 || k < 0 || i >= target.size[0] || j >= target.size[1] || k >= target.size[2]) continue;
           values_[at(x, y, z)] = target.values[target.at(i, j, k)];
         }
-    // Box sums of 2h + 1 along x, then y, then z: a window's sum and sum of squares per offset.
-    const int b = 2 * h + 1, o = offsets_;
-    const std::size_t ow = std::size_t(o);
-    std::vector<double> squared(values_.size());
-    for (std::size_t v = 0; v < values_.size(); ++v) squared[v] = values_[v] * values_[v];
-    std::vector<double> sx(ow * w * w), qx(sx.size()), sy(ow * ow * w), qy(sy.size());
-    sums_.assign(ow * ow * ow, 0.0);
-    squares_.assign(sums_.size(), 0.0);
-    for (std::size_t line = 0; line < w * w; ++line) { // x: lines (y, z) of the window
-      slidingSums(&values_[line * w], 1, &sx[line * ow], 1, o, b);
-      slidingSums(&squared[line * w], 1, &qx[line * ow], 1, o, b);
-    }
-    for (std::size_t z = 0; z < w; ++z) // y: lines (x, z) of the x sums
-      for (std::size_t x = 0; x < ow; ++x) {
-        slidingSums(&sx[x + ow * w * z], ow, &sy[x + ow * ow * z], ow, o, b);
-        slidingSums(&qx[x + ow * w * z], ow, &qy[x + ow * ow * z], ow, o, b);
-      }
-    for (std::size_t line = 0; line < ow * ow; ++line) { // z: lines (x, y) of the y sums
-      slidingSums(&sy[line], ow * ow, &sums_[line], ow * ow, o, b);
-      slidingSums(&qy[line], ow * ow, &squares_[line], ow * ow, o, b);
-    }
+    windowSums();
+    const int o = offsets_;
     inside_.resize(sums_.size());
     for (int z = 0; z < o; ++z)
       for (int y = 0; y < o; ++y)
         for (int x = 0; x < o; ++x) {
           inside_[offsetIndex(x, y, z)] = target.inside(start[0] - radius + x, start[1] - radius + y, start[2] - radius + z, h);
         }
+  }
+
+  /// The scan as the prediction deforms the block: the window's voxel o (from the block's centre,
+  /// in grid voxels) is `target` at start + stretch o (continuous grid indices, trilinear). An
+  /// offset whose block reaches a point beyond the grid is outside.
+  SearchWindow(const Volume<float>& target, const std::array<double, 3>& start, const std::array<std::array<double, 3>, 3>& stretch,
+               int radius, int h)
+    : radius_(radius), h_(h), width_(2 * (radius + h) + 1), offsets_(2 * radius + 1)
+  {
+    const std::size_t w = std::size_t(width_);
+    values_.assign(w * w * w, 0.0);
+    std::vector<double> beyond(values_.size(), 0.0);
+    bool anyBeyond = false;
+    const int reach = radius + h;
+    for (int z = 0; z < width_; ++z)
+      for (int y = 0; y < width_; ++y) {
+        double c[3]; // the row's first point, then one step of stretch's first column a voxel
+        for (std::size_t a = 0; a < 3; ++a) c[a] = start[a] - stretch[a][0] * reach + stretch[a][1] * (y - reach) + stretch[a][2] * (z - reach);
+        for (int x = 0; x < width_; ++x, c[0] += stretch[0][0], c[1] += stretch[1][0], c[2] += stretch[2][0]) {
+          if (!trilinear(target, c, values_[at(x, y, z)])) {
+            beyond[at(x, y, z)] = 1.0;
+            anyBeyond = true;
+          }
+        }
+      }
+    windowSums();
+    inside_.assign(sums_.size(), 1);
+    if (anyBeyond) {
+      const std::vector<double> beyondPerOffset = boxSums(beyond);
+      for (std::size_t k = 0; k < inside_.size(); ++k) inside_[k] = beyondPerOffset[k] < 0.5;
+    }
   }
 
   /// The correlation of `source` at each of `count` offsets (each within the radius): -2 where the
@@ -324,6 +336,51 @@ public:
   }
 
 private:
+  /// Box sums of 2h + 1 along x, then y, then z of a window-sized volume: one value per offset.
+  std::vector<double> boxSums(const std::vector<double>& in) const
+  {
+    const std::size_t w = std::size_t(width_);
+    const int b = 2 * h_ + 1, o = offsets_;
+    const std::size_t ow = std::size_t(o);
+    std::vector<double> sx(ow * w * w), sy(ow * ow * w), out(ow * ow * ow, 0.0);
+    for (std::size_t line = 0; line < w * w; ++line) slidingSums(&in[line * w], 1, &sx[line * ow], 1, o, b); // x: lines (y, z)
+    for (std::size_t z = 0; z < w; ++z) // y: lines (x, z) of the x sums
+      for (std::size_t x = 0; x < ow; ++x) slidingSums(&sx[x + ow * w * z], ow, &sy[x + ow * ow * z], ow, o, b);
+    for (std::size_t line = 0; line < ow * ow; ++line) slidingSums(&sy[line], ow * ow, &out[line], ow * ow, o, b); // z: lines (x, y)
+    return out;
+  }
+  /// Each offset's window sum and sum of squares.
+  void windowSums()
+  {
+    std::vector<double> squared(values_.size());
+    for (std::size_t v = 0; v < values_.size(); ++v) squared[v] = values_[v] * values_[v];
+    sums_ = boxSums(values_);
+    squares_ = boxSums(squared);
+  }
+  /// `target` at continuous grid index c, trilinear, into `value`; false (value 0) beyond its
+  /// outermost voxel centres.
+  static bool trilinear(const Volume<float>& target, const double c[3], double& value)
+  {
+    int base[3];
+    double f[3];
+    for (int a = 0; a < 3; ++a) {
+      if (!(c[a] >= 0.0 && c[a] <= double(target.size[std::size_t(a)] - 1))) {
+        value = 0.0;
+        return false;
+      }
+      base[a] = std::min(int(c[a]), std::max(0, target.size[std::size_t(a)] - 2));
+      f[a] = c[a] - double(base[a]);
+    }
+    const std::size_t sy = std::size_t(target.size[0]), sz = sy * std::size_t(target.size[1]);
+    const float* p = &target.values[target.at(base[0], base[1], base[2])];
+    // A one-voxel axis has no neighbour: its fraction is 0 there, and its step is not taken.
+    const std::size_t dx = target.size[0] > 1 ? 1 : 0, dy = target.size[1] > 1 ? sy : 0, dz = target.size[2] > 1 ? sz : 0;
+    const double x00 = p[0] + (p[dx] - p[0]) * f[0], x10 = p[dy] + (p[dx + dy] - p[dy]) * f[0];
+    const double x01 = p[dz] + (p[dx + dz] - p[dz]) * f[0], x11 = p[dy + dz] + (p[dx + dy + dz] - p[dy + dz]) * f[0];
+    const double y0 = x00 + (x10 - x00) * f[1], y1 = x01 + (x11 - x01) * f[1];
+    value = y0 + (y1 - y0) * f[2];
+    return true;
+  }
   std::size_t at(int x, int y, int z) const
   {
     return std::size_t(x) + std::size_t(width_) * (std::size_t(y) + std::size_t(width_) * std::size_t(z));
@@ -443,16 +500,26 @@ SearchPeak searchPeak(const SearchWindow& window, const SourceBlock& source, int
   return peak;
 }
 
-Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, BlockMatch& match)
+/// The prediction's gradient at a block's centre, in the matching grid's voxels (d index / d index):
+/// the window is sampled along I + this. Absent: the window is translated alone.
+using PredictedGradient = std::optional<std::array<std::array<double, 3>, 3>>;
+
+Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, const PredictedGradient& gradient, BlockMatch& match)
 {
   const SourceBlock source = sourceBlock(c.remappedPreop, centre[0], centre[1], centre[2], c.h);
+  std::array<double, 3> predictedIndex{}; // the predicted displacement in grid voxels
   std::array<int, 3> start{};
   for (int a = 0; a < 3; ++a) {
-    double offset = 0;
-    for (int b = 0; b < 3; ++b) offset += c.geometry.physicalToIndex(a, b) * match.predicted[std::size_t(b)];
-    start[std::size_t(a)] = centre[std::size_t(a)] + int(std::lround(offset));
+    for (int b = 0; b < 3; ++b) predictedIndex[std::size_t(a)] += c.geometry.physicalToIndex(a, b) * match.predicted[std::size_t(b)];
+    start[std::size_t(a)] = centre[std::size_t(a)] + int(std::lround(predictedIndex[std::size_t(a)]));
   }
-  const SearchWindow window(c.intraop, start, c.radius, c.h);
+  // The window's voxel o from the block's centre lies at start + stretch o in the grid (start in
+  // whole voxels, as the translated window's: the deformed one's centre is the grid's own voxel).
+  std::array<std::array<double, 3>, 3> stretch{};
+  for (std::size_t a = 0; a < 3; ++a)
+    for (std::size_t b = 0; b < 3; ++b) stretch[a][b] = (a == b ? 1.0 : 0.0) + (gradient ? (*gradient)[a][b] : 0.0);
+  const SearchWindow window = gradient ? SearchWindow(c.intraop, {double(start[0]), double(start[1]), double(start[2])}, stretch, c.radius, c.h)
+                                       : SearchWindow(c.intraop, start, c.radius, c.h);
   const SearchPeak peak = searchPeak(window, source, c.radius, c.coarseStep);
   const std::array<int, 3>& best = peak.offset;
   const double bestScore = peak.score;
@@ -476,16 +543,26 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, Blo
     if (curvature < 0) sub[std::size_t(a)] = std::clamp(0.5 * (sm - sp) / curvature, -0.5, 0.5);
   }
   match.sharpness = fall / 3;
+  // The matched place, in grid voxels from the block's centre: where the window's offset lies.
+  std::array<double, 3> moved{};
+  for (std::size_t a = 0; a < 3; ++a) {
+    moved[a] = double(start[a] - centre[a]);
+    for (std::size_t b = 0; b < 3; ++b) moved[a] += stretch[a][b] * (best[b] + sub[b]);
+  }
   // The matched block must be brain in the scan (not the cavity, the gap or the skull).
-  const std::array<int, 3> at{start[0] + best[0], start[1] + best[1], start[2] + best[2]};
+  std::array<int, 3> at{};
+  for (std::size_t a = 0; a < 3; ++a) at[a] = gradient ? centre[a] + int(std::lround(moved[a])) : start[a] + best[a];
   std::size_t brain = 0, total = 0;
   for (int k = at[2] - c.h; k <= at[2] + c.h; ++k)
     for (int j = at[1] - c.h; j <= at[1] + c.h; ++j)
-      for (int i = at[0] - c.h; i <= at[0] + c.h; ++i, ++total) brain += isBrain(c.parameters.brainLabels, c.intraopLabels.values[c.intraopLabels.at(i, j, k)]);
+      for (int i = at[0] - c.h; i <= at[0] + c.h; ++i, ++total) {
+        const bool inGrid = i >= 0 && j >= 0 && k >= 0 && i < c.intraopLabels.size[0] && j < c.intraopLabels.size[1] && k < c.intraopLabels.size[2];
+        brain += inGrid && isBrain(c.parameters.brainLabels, c.intraopLabels.values[c.intraopLabels.at(i, j, k)]);
+      }
   if (double(brain) < c.parameters.minimumBrainShare * double(total)) return Outcome::OutsideBrain;
   for (int a = 0; a < 3; ++a) {
     double d = 0;
-    for (int b = 0; b < 3; ++b) d += c.geometry.indexToPhysical(a, b) * (at[std::size_t(b)] - centre[std::size_t(b)] + sub[std::size_t(b)]);
+    for (int b = 0; b < 3; ++b) d += c.geometry.indexToPhysical(a, b) * (gradient ? moved[std::size_t(b)] : at[std::size_t(b)] - centre[std::size_t(b)] + sub[std::size_t(b)]);
     match.displacement[std::size_t(a)] = d;
   }
   match.structure = structureTensor(c.remappedPreop, centre[0], centre[1], centre[2], c.h, c.geometry);
@@ -617,25 +694,80 @@ std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h
   return candidates;
 }
 
+/// The prediction's gradient (physical) in the grid's voxels (d index / d index), when the
+/// deformed window is asked for and worth it: a gradient of norm at least
+/// kDeformedWindowMinimumGradient that neither folds the block nor squeezes it below a fifth of its
+/// volume (the determinant of I + gradient at least 0.2).
+PredictedGradient gradientInVoxels(const std::optional<std::array<std::array<double, 3>, 3>>& physical, const GridGeometry& geometry)
+{
+  if (!physical) return std::nullopt;
+  double squares = 0;
+  for (const auto& row : *physical)
+    for (double g : row) squares += g * g;
+  if (!(std::sqrt(squares) >= kDeformedWindowMinimumGradient)) return std::nullopt;
+  std::array<std::array<double, 3>, 3> g{}; // P G D S
+  for (unsigned a = 0; a < 3; ++a)
+    for (unsigned b = 0; b < 3; ++b) {
+      double sum = 0;
+      for (unsigned m = 0; m < 3; ++m)
+        for (unsigned n = 0; n < 3; ++n) sum += geometry.physicalToIndex(a, m) * (*physical)[m][n] * geometry.indexToPhysical(n, b);
+      g[a][b] = sum;
+    }
+  const double determinant = (1 + g[0][0]) * ((1 + g[1][1]) * (1 + g[2][2]) - g[1][2] * g[2][1]) -
+                             g[0][1] * (g[1][0] * (1 + g[2][2]) - g[1][2] * g[2][0]) + g[0][2] * (g[1][0] * g[2][1] - (1 + g[1][1]) * g[2][0]);
+  if (!(determinant >= 0.2)) return std::nullopt;
+  return g;
+}
+
+/// One block matched in its translated window and, with a gradient, in its deformed one too: the
+/// match of the higher correlation.
+Outcome matchBestWindow(const MatchingContext& context, const std::array<int, 3>& centre, const PredictedGradient& gradient, BlockMatch& match,
+                        bool& deformedTaken)
+{
+  deformedTaken = false;
+  const BlockMatch asPredicted = match;
+  const Outcome translated = matchOne(context, centre, std::nullopt, match);
+  if (!gradient) return translated;
+  BlockMatch deformed = asPredicted;
+  const Outcome outcome = matchOne(context, centre, gradient, deformed);
+  if (outcome == Outcome::Matched && (translated != Outcome::Matched || deformed.similarity > match.similarity)) {
+    match = deformed;
+    deformedTaken = true;
+    return outcome;
+  }
+  return translated;
+}
+
 /// Every candidate matched, the blocks shared between two threads; the outcomes counted.
 void matchCandidates(const MatchingContext& context, const ScalarImage& grid, const std::vector<std::array<int, 3>>& candidates,
                      const DisplacementPrediction& prediction, BlockMatchingResult& result)
 {
   std::vector<BlockMatch> matches(candidates.size());
+  std::vector<PredictedGradient> gradients(candidates.size());
   for (std::size_t b = 0; b < candidates.size(); ++b) { // the prediction need not be thread-safe
     grid.TransformIndexToPhysicalPoint({{candidates[b][0], candidates[b][1], candidates[b][2]}}, matches[b].centre);
-    matches[b].predicted = prediction ? prediction(matches[b].centre) : std::array<double, 3>{0, 0, 0};
+    const std::optional<PredictedDisplacement> predicted = prediction ? prediction(matches[b].centre) : std::nullopt;
+    if (!predicted) continue;
+    matches[b].predicted = predicted->displacement;
+    if (context.parameters.deformedWindows) gradients[b] = gradientInVoxels(predicted->gradient, context.geometry);
   }
   std::vector<Outcome> outcomes(candidates.size(), Outcome::LowSimilarity);
+  std::vector<char> deformedTaken(candidates.size(), 0);
   const unsigned threads = std::max(1u, std::min(2u, std::thread::hardware_concurrency()));
   std::vector<std::thread> workers;
   for (unsigned t = 0; t < threads; ++t) {
     workers.emplace_back([&, t] {
-      for (std::size_t b = t; b < candidates.size(); b += threads) outcomes[b] = matchOne(context, candidates[b], matches[b]);
+      for (std::size_t b = t; b < candidates.size(); b += threads) {
+        bool taken = false;
+        outcomes[b] = matchBestWindow(context, candidates[b], gradients[b], matches[b], taken);
+        deformedTaken[b] = taken;
+      }
     });
   }
   for (std::thread& w : workers) w.join();
   for (std::size_t b = 0; b < candidates.size(); ++b) {
+    result.deformedWindows += gradients[b].has_value();
+    result.deformedWindowsTaken += deformedTaken[b] && outcomes[b] == Outcome::Matched;
     switch (outcomes[b]) {
     case Outcome::Matched: result.matches.push_back(matches[b]); break;
     case Outcome::LowSimilarity: ++result.lowSimilarity; break;

@@ -19,6 +19,7 @@
 #include <array>
 #include <cstddef>
 #include <functional>
+#include <optional>
 #include <vector>
 
 namespace brainshift {
@@ -46,7 +47,18 @@ struct BlockMatchingParameters {
   /// Preoperative labels whose tissue is gone from the scan (the tumour when resected): blocks that
   /// hold any of them are not matched.
   std::vector<int> excludedLabels;
+  /// Where the prediction shears or stretches the brain (its gradient's norm at least
+  /// kDeformedWindowMinimumGradient), a block is matched twice: in the window translated by the
+  /// prediction, as everywhere, and in the window the prediction's local affine map deforms (its
+  /// gradient at the block's centre), so that what remains to be found is nearly a translation;
+  /// the higher correlation is kept. False: translated alone.
+  bool deformedWindows = false;
 };
+
+/// The least gradient norm of the prediction at which a block is also matched in its deformed
+/// window (see BlockMatchingParameters::deformedWindows): below it the two windows differ by less
+/// than a tenth of a voxel per voxel from the centre.
+constexpr double kDeformedWindowMinimumGradient = 0.1;
 
 struct BlockMatch {
   PhysicalPoint centre;                ///< preoperative frame (mm)
@@ -70,12 +82,21 @@ struct BlockMatchingResult {
   std::size_t lowSimilarity = 0;     ///< dropped: the peak's correlation below the minimum
   std::size_t outsideBrain = 0;      ///< dropped: the matched block not brain in the scan
   std::size_t atSearchEdge = 0;      ///< dropped: the peak on the edge of the search window
+  /// Blocks matched in their deformed window too (deformedWindows), and those whose match came from it.
+  std::size_t deformedWindows = 0, deformedWindowsTaken = 0;
   double remapSeconds = 0, selectionSeconds = 0, matchingSeconds = 0;
   double remapCorrelationRatio = 0;  ///< eta^2 of the intraoperative given the preoperative intensity
 };
 
-/// The displacement (mm, model frame) a prediction gives at a preoperative point.
-using DisplacementPrediction = std::function<std::array<double, 3>(const PhysicalPoint&)>;
+/// What a prediction gives at a preoperative point: the displacement (mm, model frame) and, where it
+/// knows it, its gradient there (gradient[a][b] = d displacement_a / d x_b).
+struct PredictedDisplacement {
+  std::array<double, 3> displacement{};
+  std::optional<std::array<std::array<double, 3>, 3>> gradient;
+};
+/// The prediction at a preoperative point; nullopt where it gives none (outside the model: no
+/// displacement predicted).
+using DisplacementPrediction = std::function<std::optional<PredictedDisplacement>(const PhysicalPoint&)>;
 
 /// Matches blocks of `preopImage` inside the brain of `preopLabels` in `intraopImage`, whose
 /// classification `intraopLabels` (on its grid) says where the brain is in the scan.

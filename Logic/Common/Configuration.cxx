@@ -225,10 +225,10 @@ void readBlockMatching(const json& c, const std::string& file, Configuration& co
     {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks}, {"selection_cell_mm", &b.selectionCellMm},
     {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
     {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
-  std::set<std::string> keys{"enabled"};
+  std::set<std::string> keys{"enabled", "deformed_windows"};
   for (const auto& [key, target] : numbers) keys.insert(key);
   requireKnownKeys(c, keys, file + ": block_matching");
-  readFlags(c, {{"enabled", &b.enabled}}, file + ": block_matching");
+  readFlags(c, {{"enabled", &b.enabled}, {"deformed_windows", &b.deformedWindows}}, file + ": block_matching");
   for (const auto& [key, target] : numbers) {
     if (c.contains(key)) *target = number(c[key], file + ": block_matching." + key);
   }

@@ -106,6 +106,10 @@ struct Configuration {
     double blockHalfSizeMm = 4.0, blockSpacingMm = 4.0, selectedShare = 0.5, searchRadiusMm = 6.0, minimumSimilarity = 0.5;
     double maximumBlocks = 3000;
     double selectionCellMm = 8;     ///< the selection spread over cubes this wide (BlockMatching.h); 0: by structure alone
+    /// Where the surface-driven solve shears or stretches the brain, each block matched in the
+    /// window it deforms too, the better correlation kept (BlockMatchingParameters::deformedWindows;
+    /// README "Blocks matched as the brain deforms": better on the hard scenarios' large sinks).
+    bool deformedWindows = true;
     double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;

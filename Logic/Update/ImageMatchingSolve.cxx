@@ -112,6 +112,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
                           {"cells_with_a_block", matching.selectionCellsWithBlock}}},
            {"matched", matching.matches.size()},
            {"dropped", {{"low_similarity", matching.lowSimilarity}, {"outside_brain", matching.outsideBrain}, {"at_search_edge", matching.atSearchEdge}}},
+           {"deformed_windows", {{"tried", matching.deformedWindows}, {"taken", matching.deformedWindowsTaken}}},
            {"constraints", solved.constraints.constraints.size()},
            {"excluded_labels", inputs.tumourResected ? std::vector<int>{4} : std::vector<int>{}},
            {"remap_correlation_ratio", matching.remapCorrelationRatio},
@@ -124,9 +125,10 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
     context.say("simulate: %zu of the earlier solve's %zu matches still in the brain of this classification (%.2f s)\n",
                 matching.matches.size(), kept->matching->matches.size(), matching.selectionSeconds);
   } else {
-    context.say("simulate: %zu of %zu blocks matched (%zu low similarity, %zu outside the brain, %zu at the search edge) in %.2f s\n",
+    context.say("simulate: %zu of %zu blocks matched (%zu low similarity, %zu outside the brain, %zu at the search edge; %zu of %zu "
+                "tried in the window the surface-driven solve deforms matched better there) in %.2f s\n",
                 matching.matches.size(), matching.selected, matching.lowSimilarity, matching.outsideBrain, matching.atSearchEdge,
-                matching.remapSeconds + matching.selectionSeconds + matching.matchingSeconds);
+                matching.deformedWindowsTaken, matching.deformedWindows, matching.remapSeconds + matching.selectionSeconds + matching.matchingSeconds);
   }
   if (solved.used) {
     const FiniteElementResult& result = solved.result;

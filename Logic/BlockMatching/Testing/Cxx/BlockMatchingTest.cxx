@@ -13,6 +13,10 @@
 // - the selection spread over the brain: where half the brain has a tenth of the contrast, the
 //   most structured blocks all lie in the other half; spread over 8 mm cubes, every cube gets a
 //   block before any gets a second, half of them lie in the faint half, and match there;
+// - under a strong shear (the brain sinking beside tissue that stays), with the prediction's
+//   displacement and gradient exact: translated windows match worse (lower correlations, larger
+//   errors) than the windows the prediction deforms, which the blocks then take; without the
+//   gradient (or without the option) the matching is the translated one, match for match;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -148,6 +152,69 @@ void checkSelectionSpreadOverTheBrain()
     BS_CHECK_MSG(again.matches[m].centre == spread.matches[m].centre && again.matches[m].displacement == spread.matches[m].displacement, m);
   }
 }
+/// A shear of 0.45 (x moves 0.45 mm per mm of z, as under the edge of a craniotomy that sank)
+/// and a translation, on a 1 mm grid: with the exact prediction, the deformed windows find what
+/// remains (nothing, to the sub-voxel fit's precision) where the translated ones, their texture
+/// sheared across the block, correlate less and err more.
+void checkDeformedWindowsUnderShear()
+{
+  const double shear = 0.45;
+  const std::array<double, 3> translation{1.0, -0.5, 0.8};
+  auto displacement = [&](const PhysicalPoint& x) { return std::array<double, 3>{translation[0] + shear * x[2], translation[1], translation[2]}; };
+  const ImageGeometry grid = testing::grid({{80, 80, 80}}, {1.0, 1.0, 1.0}, testing::point(-40, -40, -40));
+  const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(texture(p)); });
+  const LabelImage::Pointer labels = testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(distance(p, {0, 0, 0}) > 30 ? 0 : 2); });
+  auto source = [&](const PhysicalPoint& y) { // the preoperative point seen at y: y = x + u(x)
+    const double z = y[2] - translation[2];
+    return testing::point(y[0] - translation[0] - shear * z, y[1] - translation[1], z);
+  };
+  std::mt19937_64 rng(17);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  const ScalarImage::Pointer scan = testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& y) { return float(texture(source(y)) + noise(rng)); });
+  const LabelImage::Pointer scanLabels =
+    testing::imageOn<LabelImage>(grid, [&](const PhysicalPoint& y) { return LabelPixel(distance(source(y), {0, 0, 0}) > 30 ? 0 : 2); });
+  auto identity = itk::Euler3DTransform<double>::New();
+  const std::array<std::array<double, 3>, 3> gradient{{{0, 0, shear}, {0, 0, 0}, {0, 0, 0}}};
+  const DisplacementPrediction exact = [&](const PhysicalPoint& x) { return PredictedDisplacement{displacement(x), gradient}; };
+  const DisplacementPrediction withoutGradient = [&](const PhysicalPoint& x) { return PredictedDisplacement{displacement(x), std::nullopt}; };
+  BlockMatchingParameters parameters;
+  parameters.blockHalfSizeMm = 4.5;
+  parameters.blockSpacingMm = 6;
+  parameters.selectedShare = 1.0;
+  parameters.minimumSimilarity = 0.2;
+  parameters.largestPredictedMm = 15;
+  const BlockMatchingResult translated = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, exact, parameters);
+  parameters.deformedWindows = true;
+  const BlockMatchingResult deformed = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, exact, parameters);
+  const BlockMatchingResult noGradient = matchBlocks(*preop, *labels, *scan, *scanLabels, *identity, withoutGradient, parameters);
+  struct Figures {
+    double medianError = 99, meanSimilarity = 0;
+  };
+  auto figures = [&](const BlockMatchingResult& r) {
+    Figures f;
+    std::vector<double> errors;
+    for (const BlockMatch& m : r.matches) {
+      const std::array<double, 3> truth = displacement(m.centre);
+      errors.push_back(std::hypot(m.displacement[0] - truth[0], m.displacement[1] - truth[1], m.displacement[2] - truth[2]));
+      f.meanSimilarity += m.similarity / double(r.matches.size());
+    }
+    std::sort(errors.begin(), errors.end());
+    if (!errors.empty()) f.medianError = errors[errors.size() / 2];
+    return f;
+  };
+  const Figures t = figures(translated), d = figures(deformed);
+  std::cout << "shear " << shear << ": translated windows " << translated.matches.size() << " of " << translated.selected << " matched, error median "
+            << t.medianError << " mm, correlation mean " << t.meanSimilarity << "; deformed " << deformed.matches.size() << " matched, error median "
+            << d.medianError << " mm, correlation mean " << d.meanSimilarity << "\n";
+  BS_CHECK_MSG(translated.selected > 40, translated.selected);
+  BS_CHECK_MSG(deformed.matches.size() >= deformed.selected * 9 / 10, deformed.matches.size() << " of " << deformed.selected);
+  BS_CHECK_MSG(d.meanSimilarity > 0.9 && d.meanSimilarity > t.meanSimilarity + 0.2, d.meanSimilarity << " vs " << t.meanSimilarity);
+  BS_CHECK_MSG(d.medianError < 0.25 && d.medianError < 0.75 * t.medianError, d.medianError << " vs " << t.medianError);
+  BS_CHECK_MSG(noGradient.matches.size() == translated.matches.size(), noGradient.matches.size() << " vs " << translated.matches.size());
+  for (std::size_t m = 0; m < std::min(noGradient.matches.size(), translated.matches.size()); ++m) {
+    BS_CHECK_MSG(noGradient.matches[m].displacement == translated.matches[m].displacement, m);
+  }
+}
 } // namespace
 
 int BlockMatchingTest(int, char*[])
@@ -237,7 +304,9 @@ int BlockMatchingTest(int, char*[])
     BS_CHECK_MSG(highest <= 1 + 1e-9, highest);
 
     // A prediction 4 mm off: found again within the search window.
-    const DisplacementPrediction off = [&](const PhysicalPoint&) { return std::array<double, 3>{shift[0] + 2.5, shift[1] - 2.0, shift[2] + 2.4}; };
+    const DisplacementPrediction off = [&](const PhysicalPoint&) {
+      return PredictedDisplacement{{shift[0] + 2.5, shift[1] - 2.0, shift[2] + 2.4}, std::nullopt};
+    };
     const BlockMatchingResult corrected = matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, off, parameters);
     const std::vector<double> correctedErrors = sortedErrors(corrected, shift);
     const double correctedMedian = correctedErrors.empty() ? 99 : correctedErrors[correctedErrors.size() / 2];
@@ -262,6 +331,7 @@ int BlockMatchingTest(int, char*[])
     });
 
     checkSelectionSpreadOverTheBrain();
+    checkDeformedWindowsUnderShear();
 
     parameters.searchRadiusMm = 0;
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "search radius");

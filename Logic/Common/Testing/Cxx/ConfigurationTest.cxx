@@ -82,6 +82,10 @@ int ConfigurationTest(int, char*[])
     // The blocks chosen by structure alone, as before they were spread over the brain.
     writeTextFileAtomically(file, R"({"block_matching": {"selection_cell_mm": 0}})");
     BS_CHECK_NEAR(Configuration::load(file).blockMatching.selectionCellMm, 0.0, 0);
+    // The blocks matched in translated windows alone, as before the deformed ones.
+    BS_CHECK(defaults.blockMatching.deformedWindows);
+    writeTextFileAtomically(file, R"({"block_matching": {"deformed_windows": false}})");
+    BS_CHECK(!Configuration::load(file).blockMatching.deformedWindows);
 
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
@@ -122,6 +126,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"block_matching": {"selection_cell_mm": -4}})", "block_matching.selection_cell_mm -4 is outside 1 to 200");
     refused(R"({"block_matching": {"selection_cell_mm": 1e-7}})", "block_matching.selection_cell_mm 1e-07 is outside 1 to 200");
     refused(R"({"block_matching": {"selection_cell_mm": 250}})", "block_matching.selection_cell_mm 250 is outside 1 to 200");
+    refused(R"({"block_matching": {"deformed_windows": 1}})", "deformed_windows");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
