@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace brainshift {
 
@@ -83,6 +84,9 @@ std::optional<PredictedDisplacement> MeshPointLocator::interpolateWithGradient(c
                                                                                const std::vector<double>& nodalGradient,
                                                                                const PhysicalPoint& point) const
 {
+  if (nodalGradient.size() != 3 * nodal.size()) {
+    throw std::invalid_argument("interpolateWithGradient: nine gradient values per node (nodalGradients) are needed");
+  }
   const auto location = locate(point);
   if (!location) return std::nullopt;
   const vtkIdType* ids = nullptr;
@@ -110,7 +114,7 @@ std::vector<double> nodalGradients(vtkUnstructuredGrid* mesh, const std::vector<
   vtkIdType count = 0;
   for (vtkIdType cell = 0; cell < mesh->GetNumberOfCells(); ++cell) {
     mesh->GetCellPoints(cell, count, ids);
-    if (count != 4) continue;
+    if (count != 4) throw std::invalid_argument("nodal gradients: cell " + std::to_string(cell) + " is not a linear tetrahedron");
     // Linear in the tetrahedron: G E = F, E's columns its edges from its first node, F's the
     // field's differences along them.
     double x[4][3], E[3][3], F[3][3];

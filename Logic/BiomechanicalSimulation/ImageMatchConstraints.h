@@ -33,7 +33,8 @@ public:
   std::optional<Location> locate(const PhysicalPoint& point) const;
   /// The nodal field (3 values per node) interpolated at the point; nullopt outside the mesh.
   std::optional<std::array<double, 3>> interpolate(const std::vector<double>& nodal, const PhysicalPoint& point) const;
-  /// The same with the field's gradient there, interpolated from `nodalGradient` (nodalGradients).
+  /// The same with the field's gradient there, interpolated from `nodalGradient` (nodalGradients;
+  /// std::invalid_argument when it holds other than nine values per node).
   std::optional<PredictedDisplacement> interpolateWithGradient(const std::vector<double>& nodal, const std::vector<double>& nodalGradient,
                                                                const PhysicalPoint& point) const;
 
@@ -45,6 +46,7 @@ private:
 /// The gradient of a nodal field (3 values per node) at each node (9 values, row by row: d field_a
 /// / d x_b): the mean of its tetrahedra's (the field is linear in each), weighted by their
 /// volumes, so that it varies smoothly from node to node; degenerate tetrahedra left out.
+/// std::invalid_argument for a field of another size or a cell that is not a linear tetrahedron.
 std::vector<double> nodalGradients(vtkUnstructuredGrid* mesh, const std::vector<double>& nodal);
 
 /// W = stiffness * max(similarity, 0)^2 * structure (xx, xy, xz, yy, yz, zz).

@@ -695,16 +695,19 @@ std::vector<std::array<int, 3>> selectCandidates(const MatchingVolumes& v, int h
 }
 
 /// The prediction's gradient (physical) in the grid's voxels (d index / d index), when the
-/// deformed window is asked for and worth it: a gradient of norm at least
-/// kDeformedWindowMinimumGradient that neither folds the block nor squeezes it below a fifth of its
-/// volume (the determinant of I + gradient at least 0.2).
+/// deformed window is asked for and worth it: a gradient whose norm (physical, Frobenius) is at
+/// least kDeformedWindowMinimumGradient and at most kDeformedWindowMaximumGradient, and that neither
+/// folds the block nor squeezes it below a fifth of its volume (the determinant of I + gradient at
+/// least 0.2). Beyond the largest, the window's voxels would lie several voxels apart: the search and
+/// its sub-voxel fit would no longer be on the grid's scale.
 PredictedGradient gradientInVoxels(const std::optional<std::array<std::array<double, 3>, 3>>& physical, const GridGeometry& geometry)
 {
   if (!physical) return std::nullopt;
   double squares = 0;
   for (const auto& row : *physical)
     for (double g : row) squares += g * g;
-  if (!(std::sqrt(squares) >= kDeformedWindowMinimumGradient)) return std::nullopt;
+  const double norm = std::sqrt(squares);
+  if (!(norm >= kDeformedWindowMinimumGradient && norm <= kDeformedWindowMaximumGradient)) return std::nullopt;
   std::array<std::array<double, 3>, 3> g{}; // P G D S
   for (unsigned a = 0; a < 3; ++a)
     for (unsigned b = 0; b < 3; ++b) {
@@ -719,8 +722,9 @@ PredictedGradient gradientInVoxels(const std::optional<std::array<std::array<dou
   return g;
 }
 
-/// One block matched in its translated window and, with a gradient, in its deformed one too: the
-/// match of the higher correlation.
+/// One block matched in its translated window and, with a gradient, in its deformed one too. The
+/// deformed window's match is taken when it is a match and the translated one is not (low
+/// similarity, at the search's edge, outside the brain) or correlates less.
 Outcome matchBestWindow(const MatchingContext& context, const std::array<int, 3>& centre, const PredictedGradient& gradient, BlockMatch& match,
                         bool& deformedTaken)
 {

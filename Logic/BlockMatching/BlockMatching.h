@@ -47,18 +47,21 @@ struct BlockMatchingParameters {
   /// Preoperative labels whose tissue is gone from the scan (the tumour when resected): blocks that
   /// hold any of them are not matched.
   std::vector<int> excludedLabels;
-  /// Where the prediction shears or stretches the brain (its gradient's norm at least
-  /// kDeformedWindowMinimumGradient), a block is matched twice: in the window translated by the
+  /// Where the prediction shears or stretches the brain (its gradient's norm between
+  /// kDeformedWindowMinimumGradient and kDeformedWindowMaximumGradient), a block is matched twice: in the window translated by the
   /// prediction, as everywhere, and in the window the prediction's local affine map deforms (its
   /// gradient at the block's centre), so that what remains to be found is nearly a translation;
   /// the higher correlation is kept. False: translated alone.
   bool deformedWindows = false;
 };
 
-/// The least gradient norm of the prediction at which a block is also matched in its deformed
-/// window (see BlockMatchingParameters::deformedWindows): below it the two windows differ by less
-/// than a tenth of a voxel per voxel from the centre.
+/// The least norm (Frobenius, of the physical gradient) at which a block is also matched in its
+/// deformed window (see BlockMatchingParameters::deformedWindows): below it the two windows differ
+/// by less than a tenth of a millimetre per millimetre from the centre.
 constexpr double kDeformedWindowMinimumGradient = 0.1;
+/// The largest: a prediction that stretches or shears the tissue by more than its own size is not
+/// a shape to match in (it is left to the translated window).
+constexpr double kDeformedWindowMaximumGradient = 1.0;
 
 struct BlockMatch {
   PhysicalPoint centre;                ///< preoperative frame (mm)

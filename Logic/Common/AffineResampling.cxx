@@ -141,21 +141,37 @@ std::array<std::array<double, 3>, 3> physicalToIndexOf(const Image& image)
   return rows;
 }
 
+/// Whether a region starts at index 0 on every axis.
+template <class Region>
+bool startsAtZero(const Region& region)
+{
+  for (unsigned a = 0; a < Region::ImageDimension; ++a) {
+    if (region.GetIndex()[a] != 0) return false;
+  }
+  return true;
+}
+
 /// The field's vectors; refuses a field without its whole buffer.
 const DisplacementVector* displacementsOf(const DisplacementFieldImage& field)
 {
-  if (!field.GetBufferPointer() || field.GetBufferedRegion() != field.GetLargestPossibleRegion()) {
-    throw std::invalid_argument("warping: the displacement field holds no whole buffer");
+  const auto& region = field.GetLargestPossibleRegion();
+  if (!field.GetBufferPointer() || field.GetBufferedRegion() != region || !startsAtZero(region)) {
+    throw std::invalid_argument("warping: the displacement field holds no whole buffer from index 0");
   }
   return field.GetBufferPointer();
 }
 
 /// `image` by `at` (linearAt or nearestAt) at each voxel of `grid`: its point through `gridToImage`,
-/// or moved by `field`'s vector (the field on `grid`).
+/// or moved by `field`'s vector (the field on `grid`). The image must hold its whole buffer from
+/// index 0 (std::invalid_argument otherwise), as the field must.
 template <class Image, class At>
 std::vector<typename Image::PixelType> sampled(const Image& image, const ImageGeometry& grid, const SpatialTransform* gridToImage,
                                                const DisplacementFieldImage* field, At at)
 {
+  const auto& region = image.GetLargestPossibleRegion();
+  if (!image.GetBufferPointer() || image.GetBufferedRegion() != region || !startsAtZero(region)) {
+    throw std::invalid_argument("resampling: the image holds no whole buffer from index 0");
+  }
   const DisplacementVector* displacement = field ? displacementsOf(*field) : nullptr;
   const IndexMap map = indexMapOf(image, grid, gridToImage);
   const std::array<long, 3> size = sizeOf(image);

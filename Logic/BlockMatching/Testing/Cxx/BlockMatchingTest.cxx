@@ -153,7 +153,7 @@ void checkSelectionSpreadOverTheBrain()
   }
 }
 /// A shear of 0.45 (x moves 0.45 mm per mm of z, as under the edge of a craniotomy that sank)
-/// and a translation, on a 1 mm grid: with the exact prediction, the deformed windows find what
+/// and a translation, on an oblique grid of 1-1.3 mm: with the exact prediction, the deformed windows find what
 /// remains (nothing, to the sub-voxel fit's precision) where the translated ones, their texture
 /// sheared across the block, correlate less and err more.
 void checkDeformedWindowsUnderShear()
@@ -161,7 +161,9 @@ void checkDeformedWindowsUnderShear()
   const double shear = 0.45;
   const std::array<double, 3> translation{1.0, -0.5, 0.8};
   auto displacement = [&](const PhysicalPoint& x) { return std::array<double, 3>{translation[0] + shear * x[2], translation[1], translation[2]}; };
-  const ImageGeometry grid = testing::grid({{80, 80, 80}}, {1.0, 1.0, 1.0}, testing::point(-40, -40, -40));
+  // Oblique and anisotropic, so that the gradient's passage into the grid's voxels (P G D S)
+  // matters: the physical gradient taken for the voxels' would stretch the wrong axes.
+  const ImageGeometry grid = testing::grid({{76, 70, 62}}, {1.0, 1.15, 1.3}, testing::point(-38, -40, -40), testing::rotationAbout(0.3, -0.4, 1.0, 25));
   const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(texture(p)); });
   const LabelImage::Pointer labels = testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(distance(p, {0, 0, 0}) > 30 ? 0 : 2); });
   auto source = [&](const PhysicalPoint& y) { // the preoperative point seen at y: y = x + u(x)
@@ -208,8 +210,8 @@ void checkDeformedWindowsUnderShear()
             << d.medianError << " mm, correlation mean " << d.meanSimilarity << "\n";
   BS_CHECK_MSG(translated.selected > 40, translated.selected);
   BS_CHECK_MSG(deformed.matches.size() >= deformed.selected * 9 / 10, deformed.matches.size() << " of " << deformed.selected);
-  BS_CHECK_MSG(d.meanSimilarity > 0.9 && d.meanSimilarity > t.meanSimilarity + 0.2, d.meanSimilarity << " vs " << t.meanSimilarity);
-  BS_CHECK_MSG(d.medianError < 0.25 && d.medianError < 0.75 * t.medianError, d.medianError << " vs " << t.medianError);
+  BS_CHECK_MSG(d.meanSimilarity > 0.9 && d.meanSimilarity > t.meanSimilarity + 0.1, d.meanSimilarity << " vs " << t.meanSimilarity);
+  BS_CHECK_MSG(d.medianError < 0.2 && d.medianError < 0.5 * t.medianError, d.medianError << " vs " << t.medianError);
   BS_CHECK_MSG(noGradient.matches.size() == translated.matches.size(), noGradient.matches.size() << " vs " << translated.matches.size());
   for (std::size_t m = 0; m < std::min(noGradient.matches.size(), translated.matches.size()); ++m) {
     BS_CHECK_MSG(noGradient.matches[m].displacement == translated.matches[m].displacement, m);

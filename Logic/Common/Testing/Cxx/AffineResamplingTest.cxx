@@ -207,5 +207,6 @@ int AffineResamplingTest(int, char*[])
     }
     BS_CHECK_MSG(moved == 0, moved);
     BS_CHECK_THROWS(linearlyWarped(*image, *DisplacementFieldImage::New()), std::invalid_argument, "no whole buffer");
+    BS_CHECK_THROWS(linearlyWarped(*ScalarImage::New(), *zero), std::invalid_argument, "no whole buffer");
   });
 }
