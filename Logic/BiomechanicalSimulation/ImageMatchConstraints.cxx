@@ -249,7 +249,9 @@ ImageDrivenSolve solveWithImageMatches(vtkUnstructuredGrid* mesh, const FiniteEl
   ImageDrivenSolve out;
   out.result = surfaceOnly;
   const MeshPointLocator locator(mesh);
-  const std::vector<double> gradients = configuration.blockMatching.deformedWindows ? nodalGradients(mesh, surfaceOnly.displacements) : std::vector<double>{};
+  // The gradients only for a matching anew (a refine pass holds the earlier matches instead).
+  const bool deformed = configuration.blockMatching.deformedWindows && !in.earlierMatching;
+  const std::vector<double> gradients = deformed ? nodalGradients(mesh, surfaceOnly.displacements) : std::vector<double>{};
   const DisplacementPrediction prediction = [&](const PhysicalPoint& x) -> std::optional<PredictedDisplacement> {
     if (gradients.empty()) {
       const auto displacement = locator.interpolate(surfaceOnly.displacements, x);

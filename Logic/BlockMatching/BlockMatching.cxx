@@ -504,6 +504,20 @@ SearchPeak searchPeak(const SearchWindow& window, const SourceBlock& source, int
 /// the window is sampled along I + this. Absent: the window is translated alone.
 using PredictedGradient = std::optional<std::array<std::array<double, 3>, 3>>;
 
+/// Whether the scan's classification calls at least the minimum brain share of the block about
+/// `at` (grid voxels) brain (a voxel beyond the grid is not).
+bool mostlyBrainAround(const MatchingContext& c, const std::array<int, 3>& at)
+{
+  std::size_t brain = 0, total = 0;
+  for (int k = at[2] - c.h; k <= at[2] + c.h; ++k)
+    for (int j = at[1] - c.h; j <= at[1] + c.h; ++j)
+      for (int i = at[0] - c.h; i <= at[0] + c.h; ++i, ++total) {
+        const bool inGrid = i >= 0 && j >= 0 && k >= 0 && i < c.intraopLabels.size[0] && j < c.intraopLabels.size[1] && k < c.intraopLabels.size[2];
+        brain += inGrid && isBrain(c.parameters.brainLabels, c.intraopLabels.values[c.intraopLabels.at(i, j, k)]);
+      }
+  return !(double(brain) < c.parameters.minimumBrainShare * double(total));
+}
+
 Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, const PredictedGradient& gradient, BlockMatch& match)
 {
   const SourceBlock source = sourceBlock(c.remappedPreop, centre[0], centre[1], centre[2], c.h);
@@ -552,14 +566,7 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, con
   // The matched block must be brain in the scan (not the cavity, the gap or the skull).
   std::array<int, 3> at{};
   for (std::size_t a = 0; a < 3; ++a) at[a] = gradient ? centre[a] + int(std::lround(moved[a])) : start[a] + best[a];
-  std::size_t brain = 0, total = 0;
-  for (int k = at[2] - c.h; k <= at[2] + c.h; ++k)
-    for (int j = at[1] - c.h; j <= at[1] + c.h; ++j)
-      for (int i = at[0] - c.h; i <= at[0] + c.h; ++i, ++total) {
-        const bool inGrid = i >= 0 && j >= 0 && k >= 0 && i < c.intraopLabels.size[0] && j < c.intraopLabels.size[1] && k < c.intraopLabels.size[2];
-        brain += inGrid && isBrain(c.parameters.brainLabels, c.intraopLabels.values[c.intraopLabels.at(i, j, k)]);
-      }
-  if (double(brain) < c.parameters.minimumBrainShare * double(total)) return Outcome::OutsideBrain;
+  if (!mostlyBrainAround(c, at)) return Outcome::OutsideBrain;
   for (int a = 0; a < 3; ++a) {
     double d = 0;
     for (int b = 0; b < 3; ++b) d += c.geometry.indexToPhysical(a, b) * (gradient ? moved[std::size_t(b)] : at[std::size_t(b)] - centre[std::size_t(b)] + sub[std::size_t(b)]);
