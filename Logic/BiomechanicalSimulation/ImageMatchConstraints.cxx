@@ -190,6 +190,7 @@ BlockMatchingParameters blockMatchingParametersFrom(const Configuration& configu
   p.searchRadiusMm = c.searchRadiusMm;
   p.minimumSimilarity = c.minimumSimilarity;
   p.deformedWindows = c.deformedWindows;
+  p.smoothingMm = c.smoothingMm;
   if (tumourResected) p.excludedLabels = {4};
   return p;
 }

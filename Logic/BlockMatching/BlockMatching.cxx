@@ -34,6 +34,7 @@ void requireSensible(const BlockMatchingParameters& p)
   if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
   if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
   if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
+  if (!(p.smoothingMm >= 0 && p.smoothingMm <= 5)) throw std::invalid_argument("block matching: the smoothing sigma must be in [0, 5] mm");
   if (!(p.selectionCellMm == 0 || (p.selectionCellMm >= 1 && p.selectionCellMm <= 200))) {
     throw std::invalid_argument("block matching: the selection's cell must be 0 (by structure alone) or in [1, 200] mm");
   }
@@ -576,6 +577,67 @@ Outcome matchOne(const MatchingContext& c, const std::array<int, 3>& centre, con
   return Outcome::Matched;
 }
 
+/// `volume` convolved along each grid axis with a sampled Gaussian of `sigmaMm`, cut at three
+/// sigmas; at the grid's faces the kernel is cut off there and renormalised over what it covers.
+/// Row by row (contiguous lines of the first axis, summed whole), so that it vectorises.
+void smoothGaussian(Volume<float>& volume, const std::array<double, 3>& spacing, double sigmaMm)
+{
+  std::vector<float> scratch(volume.values.size());
+  const std::array<int, 3> size = volume.size;
+  const std::size_t rowLength = std::size_t(size[0]);
+  for (int axis = 0; axis < 3; ++axis) {
+    const double sigma = sigmaMm / spacing[std::size_t(axis)]; // in voxels
+    const int reach = int(std::ceil(3 * sigma));
+    const int length = size[std::size_t(axis)];
+    if (reach < 1 || length < 2) continue;
+    std::vector<float> kernel(std::size_t(2 * reach + 1));
+    double total = 0;
+    for (int t = -reach; t <= reach; ++t) total += std::exp(-0.5 * double(t * t) / (sigma * sigma));
+    for (int t = -reach; t <= reach; ++t) kernel[std::size_t(t + reach)] = float(std::exp(-0.5 * double(t * t) / (sigma * sigma)) / total);
+    auto weightOver = [&](int from, int to) { // the kernel's weight over offsets [from, to]
+      float w = 0;
+      for (int t = from; t <= to; ++t) w += kernel[std::size_t(t + reach)];
+      return w;
+    };
+    const float* in = volume.values.data();
+    float* out = scratch.data();
+    parallelRanges(std::size_t(size[2]), [&](std::size_t kBegin, std::size_t kEnd, unsigned) {
+      for (int k = int(kBegin); k < int(kEnd); ++k)
+        for (int j = 0; j < size[1]; ++j) {
+          float* o = out + volume.at(0, j, k);
+          if (axis == 0) {
+            const float* r = in + volume.at(0, j, k);
+            for (int i = 0; i < length; ++i) {
+              if (i >= reach && i + reach < length) continue; // the interior below
+              const int from = std::max(-reach, -i), to = std::min(reach, length - 1 - i);
+              float sum = 0;
+              for (int t = from; t <= to; ++t) sum += kernel[std::size_t(t + reach)] * r[i + t];
+              o[i] = sum / weightOver(from, to);
+            }
+            if (length > 2 * reach) {
+              std::fill(o + reach, o + length - reach, 0.0f);
+              for (int t = -reach; t <= reach; ++t) {
+                const float w = kernel[std::size_t(t + reach)];
+                for (int i = reach; i < length - reach; ++i) o[i] += w * r[i + t];
+              }
+            }
+          } else {
+            const int along = axis == 1 ? j : k;
+            const int from = std::max(-reach, -along), to = std::min(reach, length - 1 - along);
+            const float scale = 1.0f / weightOver(from, to);
+            std::fill(o, o + rowLength, 0.0f);
+            for (int t = from; t <= to; ++t) {
+              const float w = kernel[std::size_t(t + reach)] * scale;
+              const float* r = in + (axis == 1 ? volume.at(0, j + t, k) : volume.at(0, j, k + t));
+              for (std::size_t i = 0; i < rowLength; ++i) o[i] += w * r[i];
+            }
+          }
+        }
+    });
+    volume.values.swap(scratch);
+  }
+}
+
 /// The matching grid and what lives on it: the preoperative image remapped into the scan's
 /// contrast, its labels, the scan and its classification brought over by the rigid transform.
 struct MatchingVolumes {
@@ -614,6 +676,11 @@ MatchingVolumes prepareVolumes(const ScalarImage& preopImage, const LabelImage& 
   parallelRanges(voxels, [&](std::size_t begin, std::size_t end, unsigned) {
     for (std::size_t n = begin; n < end; ++n) v.remapped.values[n] = float(remap(v.remapped.values[n]));
   });
+  if (parameters.smoothingMm > 0) {
+    const std::array<double, 3> spacing{v.grid->GetSpacing()[0], v.grid->GetSpacing()[1], v.grid->GetSpacing()[2]};
+    smoothGaussian(v.remapped, spacing, parameters.smoothingMm);
+    smoothGaussian(v.intraop, spacing, parameters.smoothingMm);
+  }
   return v;
 }
 

@@ -40,6 +40,10 @@ struct BlockMatchingParameters {
   double minimumSimilarity = 0.5; ///< normalised cross-correlation at the peak below this: no match
   double minimumBrainShare = 0.7; ///< of the matched block's voxels classified brain in the scan
   double gridSpacingMm = 1.0;     ///< the matching grid: the preoperative grid, no finer than this
+  /// Both images on the matching grid (the remapped preoperative one and the scan) smoothed by a
+  /// Gaussian of this sigma (mm) before blocks are chosen and matched: the scan's noise then moves
+  /// a correlation's peak less (0: not smoothed).
+  double smoothingMm = 0.0;
   /// The largest displacement the prediction gives (mm): the matching grid reaches this far beyond
   /// the brain, with the search and the block.
   double largestPredictedMm = 25.0;

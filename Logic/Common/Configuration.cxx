@@ -223,6 +223,7 @@ void readBlockMatching(const json& c, const std::string& file, Configuration& co
   const std::vector<std::pair<const char*, double*>> numbers{
     {"block_half_size_mm", &b.blockHalfSizeMm}, {"block_spacing_mm", &b.blockSpacingMm}, {"selected_share", &b.selectedShare},
     {"search_radius_mm", &b.searchRadiusMm}, {"minimum_similarity", &b.minimumSimilarity}, {"maximum_blocks", &b.maximumBlocks}, {"selection_cell_mm", &b.selectionCellMm},
+    {"smoothing_mm", &b.smoothingMm},
     {"stiffness_n_per_mm", &b.stiffnessNPerMm}, {"rejection_rounds", &b.rejectionRounds}, {"rejection_fraction", &b.rejectionFraction},
     {"outlier_factor", &b.outlierFactor}, {"rejection_floor_mm", &b.rejectionFloorMm}};
   std::set<std::string> keys{"enabled", "deformed_windows"};
@@ -464,6 +465,7 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("search_radius_mm", b.searchRadiusMm, 1, 30);
   within("minimum_similarity", b.minimumSimilarity, -1, 1);
   within("maximum_blocks", b.maximumBlocks, 1, 1e6, true);
+  within("smoothing_mm", b.smoothingMm, 0, 5);
   within("stiffness_n_per_mm", b.stiffnessNPerMm, 0, 100);
   within("rejection_rounds", b.rejectionRounds, 0, 100, true);
   within("rejection_fraction", b.rejectionFraction, 0, 1);

@@ -110,7 +110,12 @@ struct Configuration {
     /// window it deforms too, the better correlation kept (BlockMatchingParameters::deformedWindows;
     /// README "Blocks matched as the brain deforms": better on the hard scenarios' large sinks).
     bool deformedWindows = true;
-    double stiffnessNPerMm = 0.3;   ///< of a match of correlation 1 along the directions its structure pins down
+    /// Both images smoothed by a Gaussian of this sigma (mm) before blocks are matched
+    /// (BlockMatchingParameters::smoothingMm), and the matches, less noisy, held stiffer (0.3 -> 1
+    /// N/mm): README "Blocks matched in smoothed images" (both together better on the hard
+    /// scenarios, each alone not).
+    double smoothingMm = 0.7;
+    double stiffnessNPerMm = 1.0;   ///< of a match of correlation 1 along the directions its structure pins down
     double rejectionRounds = 3, rejectionFraction = 0.1, outlierFactor = 3.5, rejectionFloorMm = 2.0;
   } blockMatching;
   /// The confidence map's model (DisplacementUncertainty.h): "uncertainty" in the file. No growth

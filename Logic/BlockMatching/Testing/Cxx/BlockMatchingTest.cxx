@@ -17,6 +17,8 @@
 //   displacement and gradient exact: translated windows match worse (lower correlations, larger
 //   errors) than the windows the prediction deforms, which the blocks then take; without the
 //   gradient (or without the option) the matching is the translated one, match for match;
+// - through heavy noise, both images smoothed (a Gaussian of 0.7 mm) match with a smaller error;
+//   without noise no worse;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -217,6 +219,52 @@ void checkDeformedWindowsUnderShear()
     BS_CHECK_MSG(noGradient.matches[m].displacement == translated.matches[m].displacement, m);
   }
 }
+
+/// A translation seen through heavy noise on a 1 mm grid: both images smoothed by a Gaussian of
+/// 0.7 mm, the matches err less (the noise moves the correlation's peak less); without noise they
+/// err no more (the same kernel on both images keeps a translation a translation; what remains is
+/// the sub-voxel fit's own error).
+void checkSmoothingAgainstNoise()
+{
+  const std::array<double, 3> shift{1.3, -0.6, 2.2};
+  const ImageGeometry grid = testing::grid({{64, 64, 64}}, {1.0, 1.0, 1.0}, testing::point(-32, -32, -32));
+  const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(texture(p)); });
+  const LabelImage::Pointer labels = testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(distance(p, {0, 0, 0}) > 26 ? 0 : 2); });
+  auto source = [&](const PhysicalPoint& y) { return testing::point(y[0] - shift[0], y[1] - shift[1], y[2] - shift[2]); };
+  auto scanWithNoise = [&](double sigma) {
+    std::mt19937_64 rng(23);
+    std::normal_distribution<double> noise(0.0, sigma);
+    return testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& y) { return float(texture(source(y)) + noise(rng)); });
+  };
+  const LabelImage::Pointer scanLabels =
+    testing::imageOn<LabelImage>(grid, [&](const PhysicalPoint& y) { return LabelPixel(distance(source(y), {0, 0, 0}) > 26 ? 0 : 2); });
+  auto identity = itk::Euler3DTransform<double>::New();
+  const DisplacementPrediction none;
+  BlockMatchingParameters parameters;
+  parameters.blockHalfSizeMm = 4;
+  parameters.blockSpacingMm = 4;
+  parameters.selectedShare = 1.0;
+  parameters.minimumSimilarity = 0.2;
+  auto medianError = [&](const ScalarImage& scan, double smoothingMm, std::size_t& matched) {
+    parameters.smoothingMm = smoothingMm;
+    const BlockMatchingResult r = matchBlocks(*preop, *labels, scan, *scanLabels, *identity, none, parameters);
+    matched = r.matches.size();
+    const std::vector<double> errors = sortedErrors(r, shift);
+    return errors.empty() ? 99.0 : errors[errors.size() / 2];
+  };
+  const ScalarImage::Pointer noisy = scanWithNoise(60), clean = scanWithNoise(0);
+  std::size_t rawMatched = 0, smoothMatched = 0, cleanMatched = 0, cleanSmoothMatched = 0;
+  const double raw = medianError(*noisy, 0, rawMatched), smoothed = medianError(*noisy, 0.7, smoothMatched);
+  const double cleanRaw = medianError(*clean, 0, cleanMatched), cleanSmoothed = medianError(*clean, 0.7, cleanSmoothMatched);
+  std::cout << "heavy noise: error median " << raw << " mm (" << rawMatched << " matched), both images smoothed (0.7 mm) " << smoothed << " mm ("
+            << smoothMatched << "); without noise " << cleanRaw << " / " << cleanSmoothed << " mm\n";
+  BS_CHECK_MSG(rawMatched > 100 && smoothMatched >= rawMatched * 9 / 10, rawMatched << ", " << smoothMatched);
+  BS_CHECK_MSG(smoothed < 0.75 * raw, smoothed << " vs " << raw);
+  BS_CHECK_MSG(cleanRaw < 0.3 && cleanSmoothed <= cleanRaw + 0.02, cleanSmoothed << " vs " << cleanRaw);
+  BS_CHECK_MSG(cleanSmoothMatched >= cleanMatched * 95 / 100, cleanSmoothMatched << " vs " << cleanMatched);
+  parameters.smoothingMm = -1;
+  BS_CHECK_THROWS(matchBlocks(*preop, *labels, *noisy, *scanLabels, *identity, none, parameters), std::invalid_argument, "smoothing");
+}
 } // namespace
 
 int BlockMatchingTest(int, char*[])
@@ -334,6 +382,7 @@ int BlockMatchingTest(int, char*[])
 
     checkSelectionSpreadOverTheBrain();
     checkDeformedWindowsUnderShear();
+    checkSmoothingAgainstNoise();
 
     parameters.searchRadiusMm = 0;
     BS_CHECK_THROWS(matchBlocks(*preop, *preopLabels, *intraop, *intraopLabels, *rigid, none, parameters), std::invalid_argument, "search radius");

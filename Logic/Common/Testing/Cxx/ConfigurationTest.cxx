@@ -41,6 +41,11 @@ int ConfigurationTest(int, char*[])
     BS_CHECK_NEAR(shipped.blockMatching.selectionCellMm, defaults.blockMatching.selectionCellMm, 0);
     BS_CHECK_NEAR(defaults.blockMatching.selectionCellMm, 8.0, 0);
     BS_CHECK_NEAR(shipped.blockMatching.maximumBlocks, defaults.blockMatching.maximumBlocks, 0);
+    BS_CHECK(shipped.blockMatching.deformedWindows == defaults.blockMatching.deformedWindows);
+    BS_CHECK_NEAR(shipped.blockMatching.smoothingMm, defaults.blockMatching.smoothingMm, 0);
+    BS_CHECK_NEAR(defaults.blockMatching.smoothingMm, 0.7, 0);
+    BS_CHECK_NEAR(shipped.blockMatching.stiffnessNPerMm, defaults.blockMatching.stiffnessNPerMm, 0);
+    BS_CHECK_NEAR(defaults.blockMatching.stiffnessNPerMm, 1.0, 0);
     BS_CHECK_NEAR(shipped.uncertainty.floorMm, defaults.uncertainty.floorMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.growthPerMm, defaults.uncertainty.growthPerMm, 0);
     BS_CHECK_NEAR(shipped.uncertainty.misfitReachMm, defaults.uncertainty.misfitReachMm, 0);
@@ -86,6 +91,9 @@ int ConfigurationTest(int, char*[])
     BS_CHECK(defaults.blockMatching.deformedWindows);
     writeTextFileAtomically(file, R"({"block_matching": {"deformed_windows": false}})");
     BS_CHECK(!Configuration::load(file).blockMatching.deformedWindows);
+    // The images matched unsmoothed (0), as before the smoothing.
+    writeTextFileAtomically(file, R"({"block_matching": {"smoothing_mm": 0}})");
+    BS_CHECK_NEAR(Configuration::load(file).blockMatching.smoothingMm, 0.0, 0);
 
     auto refused = [&](const std::string& text, const std::string& fragment) {
       writeTextFileAtomically(file, text);
@@ -127,6 +135,8 @@ int ConfigurationTest(int, char*[])
     refused(R"({"block_matching": {"selection_cell_mm": 1e-7}})", "block_matching.selection_cell_mm 1e-07 is outside 1 to 200");
     refused(R"({"block_matching": {"selection_cell_mm": 250}})", "block_matching.selection_cell_mm 250 is outside 1 to 200");
     refused(R"({"block_matching": {"deformed_windows": 1}})", "deformed_windows");
+    refused(R"({"block_matching": {"smoothing_mm": -0.5}})", "smoothing_mm");
+    refused(R"({"block_matching": {"smoothing_mm": 12}})", "smoothing_mm");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
   });
