@@ -34,7 +34,9 @@ void requireSensible(const BlockMatchingParameters& p)
   if (!(p.minimumBrainShare >= 0 && p.minimumBrainShare <= 1)) throw std::invalid_argument("block matching: the minimum brain share must be in [0, 1]");
   if (!positive(p.gridSpacingMm) || p.gridSpacingMm > 10) throw std::invalid_argument("block matching: the grid spacing must be in (0, 10] mm");
   if (p.maximumBlocks == 0) throw std::invalid_argument("block matching: at least one block");
-  if (!(p.smoothingMm >= 0 && p.smoothingMm <= 5)) throw std::invalid_argument("block matching: the smoothing sigma must be in [0, 5] mm");
+  if (!(p.smoothingMm == 0 || (p.smoothingMm >= 0.1 && p.smoothingMm <= 5))) {
+    throw std::invalid_argument("block matching: the smoothing sigma must be 0 (none) or in [0.1, 5] mm");
+  }
   if (!(p.selectionCellMm == 0 || (p.selectionCellMm >= 1 && p.selectionCellMm <= 200))) {
     throw std::invalid_argument("block matching: the selection's cell must be 0 (by structure alone) or in [1, 200] mm");
   }

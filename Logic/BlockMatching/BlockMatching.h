@@ -42,7 +42,7 @@ struct BlockMatchingParameters {
   double gridSpacingMm = 1.0;     ///< the matching grid: the preoperative grid, no finer than this
   /// Both images on the matching grid (the remapped preoperative one and the scan) smoothed by a
   /// Gaussian of this sigma (mm) before blocks are chosen and matched: the scan's noise then moves
-  /// a correlation's peak less (0: not smoothed).
+  /// a correlation's peak less (0: not smoothed; else 0.1 to 5 mm).
   double smoothingMm = 0.0;
   /// The largest displacement the prediction gives (mm): the matching grid reaches this far beyond
   /// the brain, with the search and the block.

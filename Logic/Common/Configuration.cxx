@@ -465,7 +465,7 @@ void Configuration::validateBlockMatching(const std::string& source) const
   within("search_radius_mm", b.searchRadiusMm, 1, 30);
   within("minimum_similarity", b.minimumSimilarity, -1, 1);
   within("maximum_blocks", b.maximumBlocks, 1, 1e6, true);
-  within("smoothing_mm", b.smoothingMm, 0, 5);
+  if (b.smoothingMm != 0) within("smoothing_mm", b.smoothingMm, 0.1, 5); // 0: not smoothed
   within("stiffness_n_per_mm", b.stiffnessNPerMm, 0, 100);
   within("rejection_rounds", b.rejectionRounds, 0, 100, true);
   within("rejection_fraction", b.rejectionFraction, 0, 1);

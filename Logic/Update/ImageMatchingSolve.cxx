@@ -119,6 +119,7 @@ FiniteElementResult runImageDrivenSolve(RunContext& context, vtkUnstructuredGrid
            {"remap_seconds", matching.remapSeconds},
            {"selection_seconds", matching.selectionSeconds},
            {"matching_seconds", matching.matchingSeconds},
+           {"smoothing_mm", configuration.blockMatching.smoothingMm},
            {"stiffness_n_per_mm", configuration.blockMatching.stiffnessNPerMm},
            {"matches_from", reused ? "this scan's earlier solve, held against this pass's classification" : "matched anew"}};
   if (reused) {

@@ -7,6 +7,7 @@
 //   the analytic one, closer on a finer mesh.
 // - Outside the mesh: no prediction; a gradient array of another size or a cell that is not a
 //   linear tetrahedron: refused.
+// - The configuration's block matching settings reach the matching's parameters.
 #include "BrainShiftTestingSupport.h"
 #include "FiniteElementTestSupport.h"
 #include "ImageMatchConstraints.h"
@@ -141,5 +142,18 @@ int ImageMatchConstraintsTest(int, char*[])
     const vtkIdType triangle[3] = {0, 1, 2};
     withTriangle->InsertNextCell(VTK_TRIANGLE, 3, triangle);
     BS_CHECK_THROWS(nodalGradients(withTriangle, nodal), std::invalid_argument, "not a linear tetrahedron");
+
+    // The configuration's block matching reaches the matching: the deformed windows and the
+    // images' smoothing as configured, a resected tumour's label excluded.
+    Configuration configuration;
+    configuration.blockMatching.smoothingMm = 1.5;
+    configuration.blockMatching.deformedWindows = false;
+    const BlockMatchingParameters forwarded = blockMatchingParametersFrom(configuration, true);
+    BS_CHECK_NEAR(forwarded.smoothingMm, 1.5, 0);
+    BS_CHECK(!forwarded.deformedWindows);
+    BS_CHECK(forwarded.excludedLabels == std::vector<int>{4});
+    const BlockMatchingParameters byDefault = blockMatchingParametersFrom(Configuration{}, false);
+    BS_CHECK_NEAR(byDefault.smoothingMm, Configuration{}.blockMatching.smoothingMm, 0);
+    BS_CHECK(byDefault.deformedWindows && byDefault.excludedLabels.empty());
   });
 }

@@ -18,7 +18,7 @@
 //   errors) than the windows the prediction deforms, which the blocks then take; without the
 //   gradient (or without the option) the matching is the translated one, match for match;
 // - through heavy noise, both images smoothed (a Gaussian of 0.7 mm) match with a smaller error;
-//   without noise no worse;
+//   without noise no worse; one noisy image on both sides, smoothed alike, correlates fully;
 // - absurd parameters are refused.
 #include "BlockMatching.h"
 #include "BrainShiftTestingSupport.h"
@@ -223,7 +223,8 @@ void checkDeformedWindowsUnderShear()
 /// A translation seen through heavy noise on a 1 mm grid: both images smoothed by a Gaussian of
 /// 0.7 mm, the matches err less (the noise moves the correlation's peak less); without noise they
 /// err no more (the same kernel on both images keeps a translation a translation; what remains is
-/// the sub-voxel fit's own error).
+/// the sub-voxel fit's own error). One noisy image on both sides: both smoothed alike, every block
+/// correlates fully where it lies.
 void checkSmoothingAgainstNoise()
 {
   const std::array<double, 3> shift{1.3, -0.6, 2.2};
@@ -262,6 +263,24 @@ void checkSmoothingAgainstNoise()
   BS_CHECK_MSG(smoothed < 0.75 * raw, smoothed << " vs " << raw);
   BS_CHECK_MSG(cleanRaw < 0.3 && cleanSmoothed <= cleanRaw + 0.02, cleanSmoothed << " vs " << cleanRaw);
   BS_CHECK_MSG(cleanSmoothMatched >= cleanMatched * 95 / 100, cleanSmoothMatched << " vs " << cleanMatched);
+  // One image on both sides (nothing moved, the same noise in both): smoothed alike they correlate
+  // fully where they lie (were one of them smoothed alone, its noise would not match the other's).
+  const ScalarImage::Pointer still = testing::imageOn<ScalarImage>(grid, [&, rng = std::mt19937_64(29)](const PhysicalPoint& p) mutable {
+    return float(texture(p) + std::normal_distribution<double>(0.0, 60.0)(rng));
+  });
+  parameters.smoothingMm = 0.7;
+  const BlockMatchingResult same = matchBlocks(*still, *labels, *still, *labels, *identity, none, parameters);
+  std::vector<double> similarities;
+  for (const BlockMatch& m : same.matches) similarities.push_back(m.similarity);
+  std::sort(similarities.begin(), similarities.end());
+  const std::vector<double> stillErrors = sortedErrors(same, {0, 0, 0});
+  const double lowest = similarities.empty() ? -1 : similarities.front();
+  const double stillMedian = stillErrors.empty() ? 99 : stillErrors[stillErrors.size() / 2];
+  std::cout << "the same noisy image on both sides, smoothed: " << same.matches.size() << " matched, the lowest correlation " << lowest
+            << ", error median " << stillMedian << " mm\n";
+  BS_CHECK_MSG(same.matches.size() > 100, same.matches.size());
+  BS_CHECK_MSG(lowest > 0.99, lowest);
+  BS_CHECK_MSG(stillMedian < 0.05, stillMedian);
   parameters.smoothingMm = -1;
   BS_CHECK_THROWS(matchBlocks(*preop, *labels, *noisy, *scanLabels, *identity, none, parameters), std::invalid_argument, "smoothing");
 }

@@ -136,6 +136,7 @@ int ConfigurationTest(int, char*[])
     refused(R"({"block_matching": {"selection_cell_mm": 250}})", "block_matching.selection_cell_mm 250 is outside 1 to 200");
     refused(R"({"block_matching": {"deformed_windows": 1}})", "deformed_windows");
     refused(R"({"block_matching": {"smoothing_mm": -0.5}})", "smoothing_mm");
+    refused(R"({"block_matching": {"smoothing_mm": 1e-200}})", "block_matching.smoothing_mm 1e-200 is outside 0.1 to 5");
     refused(R"({"block_matching": {"smoothing_mm": 12}})", "smoothing_mm");
     refused(R"({"materials": )", "not valid JSON");
     BS_CHECK_THROWS(Configuration::load(folder / "missing.json"), InputError, "no such file");
