@@ -232,10 +232,10 @@ void checkSmoothingAgainstNoise()
   const ScalarImage::Pointer preop = testing::imageOn<ScalarImage>(grid, [](const PhysicalPoint& p) { return float(texture(p)); });
   const LabelImage::Pointer labels = testing::imageOn<LabelImage>(grid, [](const PhysicalPoint& p) { return LabelPixel(distance(p, {0, 0, 0}) > 26 ? 0 : 2); });
   auto source = [&](const PhysicalPoint& y) { return testing::point(y[0] - shift[0], y[1] - shift[1], y[2] - shift[2]); };
-  auto scanWithNoise = [&](double sigma) {
+  auto scanWithNoise = [&](double sigma) { // sigma 0: none (a normal distribution needs a positive one)
     std::mt19937_64 rng(23);
-    std::normal_distribution<double> noise(0.0, sigma);
-    return testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& y) { return float(texture(source(y)) + noise(rng)); });
+    std::normal_distribution<double> noise(0.0, sigma > 0 ? sigma : 1.0);
+    return testing::imageOn<ScalarImage>(grid, [&](const PhysicalPoint& y) { return float(texture(source(y)) + (sigma > 0 ? noise(rng) : 0.0)); });
   };
   const LabelImage::Pointer scanLabels =
     testing::imageOn<LabelImage>(grid, [&](const PhysicalPoint& y) { return LabelPixel(distance(source(y), {0, 0, 0}) > 26 ? 0 : 2); });
